@@ -1,4 +1,13 @@
 //! clsmap: a SICK LMS200 driver daemon and Closed Line Segment mapper
 //! (after Zhang & Ghosh, ICRA 2000) for holonomic robots.
 
+pub mod eval;
 pub mod geometry;
+pub mod input;
+pub mod localize;
+pub mod map;
+pub mod mapping_config;
+pub mod pipeline;
+pub mod render;
+pub mod sim;
+pub mod trajectory;

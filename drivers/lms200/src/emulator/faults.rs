@@ -1,0 +1,181 @@
+//! Line and sensor faults the emulator can inject, switchable at runtime.
+//!
+//! Byte faults (garbage, bit flips, drops) hit both directions of the line,
+//! as noise on a real cable would: corrupted requests earn a NAK from the
+//! sensor, corrupted replies are the driver's problem. All randomness comes
+//! from the emulator's seeded [`XorShift64`], so a fault run is reproducible.
+
+use super::prng::XorShift64;
+
+/// Per-byte line faults and sensor misbehaviour. `Default` is a clean line.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct FaultConfig {
+    /// Probability that a random byte is inserted before a byte on the line.
+    pub garbage_per_byte: f64,
+    /// Probability that one bit of a byte is flipped. Flips are kept at least
+    /// two bytes apart: a flip of bit k in one byte and bit k+1 in the next
+    /// cancels in the LMS checksum (protocol notes §1.3), and no framing layer
+    /// can catch that, so the injected noise stays within what the checksum
+    /// is specified to detect.
+    pub bit_flip_per_byte: f64,
+    /// Probability that a byte is lost.
+    pub drop_per_byte: f64,
+    /// Answer every Nth valid request (1-based count) with a NAK as if its
+    /// checksum had been wrong. `None` or `Some(0)`: never.
+    pub nak_every_nth_request: Option<u32>,
+}
+
+impl FaultConfig {
+    /// True when no byte-level fault is active (fast path).
+    pub fn line_is_clean(&self) -> bool {
+        self.garbage_per_byte <= 0.0 && self.bit_flip_per_byte <= 0.0 && self.drop_per_byte <= 0.0
+    }
+}
+
+/// Applies the byte faults of a [`FaultConfig`] to a stream of bytes.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct LineNoise {
+    /// Bytes since the last flip; flips need at least 2 in between.
+    since_flip: usize,
+}
+
+/// Counts of injected faults, so tests can check the driver saw them.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FaultCounts {
+    /// Random bytes inserted.
+    pub garbage_bytes: u64,
+    /// Bits flipped.
+    pub bit_flips: u64,
+    /// Bytes dropped.
+    pub dropped_bytes: u64,
+    /// Valid requests answered with a NAK on purpose.
+    pub forced_naks: u64,
+}
+
+impl LineNoise {
+    /// Passes `input` through the line, appending what arrives to `out`.
+    pub fn apply(
+        &mut self,
+        input: &[u8],
+        faults: &FaultConfig,
+        rng: &mut XorShift64,
+        counts: &mut FaultCounts,
+        out: &mut Vec<u8>,
+    ) {
+        if faults.line_is_clean() {
+            out.extend_from_slice(input);
+            return;
+        }
+        for &byte in input {
+            if rng.chance(faults.garbage_per_byte) {
+                out.push(rng.next_u8());
+                counts.garbage_bytes += 1;
+            }
+            if rng.chance(faults.drop_per_byte) {
+                counts.dropped_bytes += 1;
+                continue;
+            }
+            let mut b = byte;
+            self.since_flip = self.since_flip.saturating_add(1);
+            if self.since_flip > 2 && rng.chance(faults.bit_flip_per_byte) {
+                b ^= 1 << rng.below(8);
+                self.since_flip = 0;
+                counts.bit_flips += 1;
+            }
+            out.push(b);
+        }
+    }
+}
+
+/// Garbles bytes as a UART at the wrong line speed would: the receiver
+/// samples the wrong bit cells, so it sees different byte values, sometimes
+/// framing errors (byte lost) and sometimes two bytes where one was sent.
+pub(crate) fn garble_wrong_baud(input: &[u8], rng: &mut XorShift64, out: &mut Vec<u8>) {
+    for &byte in input {
+        match rng.below(8) {
+            0 | 1 => {} // framing error: byte lost
+            2 => {
+                out.push((byte ^ rng.next_u8()) | 0x80);
+                out.push(rng.next_u8());
+            }
+            _ => out.push(byte ^ (rng.next_u8() | 0x01)),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clean_line_passes_bytes_unchanged() {
+        let mut noise = LineNoise::default();
+        let mut rng = XorShift64::new(1);
+        let mut counts = FaultCounts::default();
+        let mut out = Vec::new();
+        noise.apply(
+            &[1, 2, 3],
+            &FaultConfig::default(),
+            &mut rng,
+            &mut counts,
+            &mut out,
+        );
+        assert_eq!(out, [1, 2, 3]);
+        assert_eq!(counts, FaultCounts::default());
+    }
+
+    #[test]
+    fn flips_are_never_in_adjacent_bytes() {
+        let mut noise = LineNoise::default();
+        let mut rng = XorShift64::new(9);
+        let mut counts = FaultCounts::default();
+        let faults = FaultConfig {
+            bit_flip_per_byte: 0.9,
+            ..FaultConfig::default()
+        };
+        let input = vec![0u8; 10_000];
+        let mut out = Vec::new();
+        noise.apply(&input, &faults, &mut rng, &mut counts, &mut out);
+        assert_eq!(out.len(), input.len());
+        let flipped: Vec<usize> = out
+            .iter()
+            .enumerate()
+            .filter(|(_, b)| **b != 0)
+            .map(|(i, _)| i)
+            .collect();
+        assert!(flipped.len() > 1000);
+        assert!(flipped.windows(2).all(|w| w[1] - w[0] >= 3));
+        assert!(out.iter().all(|b| b.count_ones() <= 1));
+        assert_eq!(counts.bit_flips as usize, flipped.len());
+    }
+
+    #[test]
+    fn drops_and_garbage_change_the_length_and_are_counted() {
+        let mut noise = LineNoise::default();
+        let mut rng = XorShift64::new(5);
+        let mut counts = FaultCounts::default();
+        let faults = FaultConfig {
+            garbage_per_byte: 0.1,
+            drop_per_byte: 0.2,
+            ..FaultConfig::default()
+        };
+        let mut out = Vec::new();
+        noise.apply(&[0x55; 1000], &faults, &mut rng, &mut counts, &mut out);
+        assert!(counts.garbage_bytes > 0 && counts.dropped_bytes > 0);
+        assert_eq!(
+            out.len() as u64,
+            1000 + counts.garbage_bytes - counts.dropped_bytes
+        );
+    }
+
+    #[test]
+    fn wrong_baud_never_passes_a_telegram_intact() {
+        let mut rng = XorShift64::new(3);
+        let input = [0x02, 0x80, 0x03, 0x00, 0xA0, 0x00, 0x10, 0x16, 0x0A];
+        for _ in 0..100 {
+            let mut out = Vec::new();
+            garble_wrong_baud(&input, &mut rng, &mut out);
+            assert_ne!(out, input);
+        }
+    }
+}

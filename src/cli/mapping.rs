@@ -1,0 +1,101 @@
+//! Mapping subcommands: `map` (offline mapping of a log) and `eval`.
+
+use std::path::Path;
+use std::process::ExitCode;
+
+use anyhow::Context as _;
+use clsmap::eval::RelationErrors;
+use clsmap::mapping_config::MapperConfig;
+use clsmap::pipeline::{self, Progress};
+use clsmap::trajectory::read_tum;
+use indicatif::{ProgressBar, ProgressStyle};
+
+pub fn map(
+    input: &Path,
+    out: &Path,
+    config: Option<&Path>,
+    relations: Option<&Path>,
+) -> anyhow::Result<ExitCode> {
+    let config = match config {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read the configuration {}", path.display()))?;
+            MapperConfig::from_toml(&text)
+                .with_context(|| format!("invalid configuration {}", path.display()))?
+        }
+        None => MapperConfig::default(),
+    };
+    let bar = ProgressBar::new(0).with_style(
+        ProgressStyle::with_template(
+            "{spinner} mapping [{bar:40}] {percent:>3}% {msg} ({elapsed} elapsed, {eta} left)",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    let mut on_progress = |p: Progress| {
+        if bar.length() != Some(p.bytes_total) {
+            bar.set_length(p.bytes_total);
+        }
+        bar.set_position(p.bytes_read);
+        if p.scans % 64 == 0 {
+            bar.set_message(format!("{} scans", p.scans));
+        }
+    };
+    let result = pipeline::run_offline_mapping(input, out, &config, &mut on_progress);
+    bar.finish_and_clear();
+    let summary = result.with_context(|| format!("cannot map {}", input.display()))?;
+    let t = &summary.mean_time;
+    println!(
+        "mapped {} scans ({} keyframes) from {}",
+        summary.scans,
+        summary.keyframes,
+        input.display()
+    );
+    println!("  segments in the map:        {}", summary.segments);
+    println!(
+        "  degenerate scans:           {} (a direction left to odometry)",
+        summary.degenerate_scans
+    );
+    println!(
+        "  localizations rejected:     {} {:?}",
+        summary.rejected_localizations, summary.rejections_by_kind
+    );
+    println!(
+        "  mean time per scan:         {:.1} µs (extraction {:.1}, localization {:.1}, map update {:.1} per keyframe)",
+        t.per_scan_us, t.extract_us, t.localize_us, t.map_update_us
+    );
+    println!("  wrote {}", out.display());
+    if let Some(relations) = relations {
+        let trajectory_file = out.join(pipeline::TRAJECTORY_FILE);
+        print_errors(&score(&trajectory_file, relations)?);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn eval(trajectory: &Path, relations: &Path) -> anyhow::Result<ExitCode> {
+    print_errors(&score(trajectory, relations)?);
+    Ok(ExitCode::SUCCESS)
+}
+
+fn score(trajectory: &Path, relations: &Path) -> anyhow::Result<RelationErrors> {
+    let file = std::fs::File::open(trajectory)
+        .with_context(|| format!("cannot open the trajectory {}", trajectory.display()))?;
+    let poses = read_tum(std::io::BufReader::new(file))
+        .with_context(|| format!("cannot read the trajectory {}", trajectory.display()))?;
+    pipeline::evaluate_relations(&poses, relations)
+        .with_context(|| format!("cannot score against {}", relations.display()))
+}
+
+fn print_errors(e: &RelationErrors) {
+    println!(
+        "relations used: {} (missing {})\n  translation: {:.3} ± {:.3} m (max {:.3})\n  rotation:    {:.3} ± {:.3} deg (max {:.3})",
+        e.used,
+        e.missing,
+        e.translation_m.mean,
+        e.translation_m.std_dev,
+        e.translation_m.max,
+        e.rotation_deg.mean,
+        e.rotation_deg.std_dev,
+        e.rotation_deg.max
+    );
+}

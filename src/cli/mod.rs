@@ -1,0 +1,213 @@
+//! Command-line interface: argument parsing and dispatch to subcommands.
+//! Errors here are `anyhow` with context; the libraries below use typed errors.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use anyhow::Context as _;
+use clap::{Parser, Subcommand, ValueEnum};
+
+mod mapping;
+mod sensor;
+
+/// SICK LMS200 driver and Closed Line Segment mapper.
+#[derive(Debug, Parser)]
+#[command(name = "clsmap", version, about, long_about = None)]
+pub struct Cli {
+    /// More log output (-v debug, -vv trace). RUST_LOG overrides.
+    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    pub verbose: u8,
+    /// Only warnings and errors.
+    #[arg(short, long, global = true)]
+    pub quiet: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Find an LMS200 on a serial port: line speed, type, firmware, variant, units.
+    Probe {
+        /// Serial device, e.g. /dev/ttyUSB0.
+        #[arg(long)]
+        port: PathBuf,
+    },
+    /// Capture the raw telegram stream of an LMS200 into a recording.
+    Record {
+        /// Serial device.
+        #[arg(long)]
+        port: PathBuf,
+        /// Recording to write.
+        #[arg(long)]
+        out: PathBuf,
+        /// Stop after this many scans (default: until Ctrl-C).
+        #[arg(long)]
+        scans: Option<u64>,
+        /// Line speed while streaming.
+        #[arg(long, default_value_t = 500_000)]
+        baud: u32,
+        /// Field of view / resolution in degrees: 180/0.5, 180/1, 100/1, 100/0.5, 100/0.25.
+        #[arg(long, default_value = "180/0.5")]
+        variant: String,
+        /// Range units.
+        #[arg(long, value_enum, default_value_t = UnitsArg::Mm)]
+        units: UnitsArg,
+    },
+    /// Decode a recording (or a raw serial dump) to one line per scan.
+    Decode {
+        /// Recording (`clsmap record`) or, with --raw, a plain byte dump.
+        file: PathBuf,
+        /// The file is a plain serial byte dump, not a recording.
+        #[arg(long)]
+        raw: bool,
+        /// Output format.
+        #[arg(long, value_enum, default_value_t = DecodeFormat::Jsonl)]
+        format: DecodeFormat,
+        /// Measuring mode of the sensor (configuration block D, hex), when
+        /// the recording does not say; it decides which bits are distance.
+        #[arg(long, value_parser = parse_hex_u8)]
+        mode: Option<u8>,
+    },
+    /// Run an emulated LMS200 on a pseudo-terminal until Ctrl-C.
+    Emulate {
+        /// Create a symlink to the emulator's tty here (e.g. /tmp/lms200).
+        #[arg(long)]
+        link: Option<PathBuf>,
+        /// Line speed the emulated sensor was left at (it powers up at 9600).
+        #[arg(long)]
+        start_baud: Option<u32>,
+        /// Probability per byte of a flipped bit on the line.
+        #[arg(long, default_value_t = 0.0)]
+        bit_flips: f64,
+        /// Probability per byte of an inserted garbage byte.
+        #[arg(long, default_value_t = 0.0)]
+        garbage: f64,
+        /// Probability per byte of a lost byte.
+        #[arg(long, default_value_t = 0.0)]
+        drops: f64,
+        /// Seed of the fault generator.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
+    /// Build a map offline from a CARMEN log or a recording.
+    Map {
+        /// CARMEN log (.clf/.log) or clsmap recording.
+        input: PathBuf,
+        /// Directory for trajectory.tum, segments.json and map.svg.
+        #[arg(long)]
+        out: PathBuf,
+        /// Mapper configuration (TOML); defaults documented in config/clsmap.toml.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Score the trajectory against a relations file (Kümmerle et al. 2009).
+        #[arg(long)]
+        relations: Option<PathBuf>,
+    },
+    /// Score a TUM trajectory against a relations file (Kümmerle et al. 2009).
+    Eval {
+        /// Trajectory in TUM format (t x y z qx qy qz qw).
+        trajectory: PathBuf,
+        /// Relations file (t1 t2 x y z roll pitch yaw).
+        #[arg(long)]
+        relations: PathBuf,
+    },
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum UnitsArg {
+    Mm,
+    Cm,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum DecodeFormat {
+    Jsonl,
+    Csv,
+}
+
+fn parse_hex_u8(s: &str) -> Result<u8, String> {
+    let digits = s.trim_start_matches("0x").trim_start_matches("0X");
+    u8::from_str_radix(digits, 16).map_err(|e| format!("`{s}` is not a hex byte: {e}"))
+}
+
+impl Cli {
+    pub fn parse_args() -> Self {
+        Cli::parse()
+    }
+}
+
+/// Logs to stderr; RUST_LOG, if set, wins over -v/-q.
+pub fn init_logging(verbose: u8, quiet: bool) {
+    let default = match (quiet, verbose) {
+        (true, _) => "warn",
+        (false, 0) => "info",
+        (false, 1) => "debug",
+        _ => "trace",
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .try_init();
+}
+
+/// A flag raised by SIGINT or SIGTERM, for commands that run until stopped.
+fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
+    let flag = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, Arc::clone(&flag))
+            .context("cannot install the signal handler")?;
+    }
+    Ok(flag)
+}
+
+pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+    match cli.command {
+        Command::Probe { port } => sensor::probe(&port),
+        Command::Record {
+            port,
+            out,
+            scans,
+            baud,
+            variant,
+            units,
+        } => sensor::record(&port, &out, scans, baud, &variant, units),
+        Command::Decode {
+            file,
+            raw,
+            format,
+            mode,
+        } => sensor::decode(&file, raw, format, mode),
+        Command::Emulate {
+            link,
+            start_baud,
+            bit_flips,
+            garbage,
+            drops,
+            seed,
+        } => sensor::emulate(
+            link.as_deref(),
+            start_baud,
+            sensor::LineFaults {
+                bit_flips,
+                garbage,
+                drops,
+                seed,
+            },
+        ),
+        Command::Map {
+            input,
+            out,
+            config,
+            relations,
+        } => mapping::map(&input, &out, config.as_deref(), relations.as_deref()),
+        Command::Eval {
+            trajectory,
+            relations,
+        } => mapping::eval(&trajectory, &relations),
+    }
+}

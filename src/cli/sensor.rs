@@ -1,0 +1,412 @@
+//! Sensor subcommands: `probe`, `record`, `decode`, `emulate`.
+
+use std::io::{BufWriter, Read, Write};
+use std::ops::ControlFlow;
+use std::path::Path;
+use std::process::ExitCode;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context as _, bail};
+use clsmap::input::lms200::{note_mode, scan_time};
+use lms200::driver::SerialDriver;
+use lms200::emulator::{Emulator, EmulatorConfig, FaultConfig};
+use lms200::link::{Event, LinkConfig};
+use lms200::pty::PtyEmulator;
+use lms200::recording::{Record, RecordingReader};
+use lms200::{Baud, DecodeEvent, Decoder, MeasuringMode, Reply, Scan, Units, Variant};
+use serde::Serialize;
+
+use super::{DecodeFormat, UnitsArg};
+
+/// Longest `probe` waits for a sensor: auto-baud over four speeds with
+/// retries, plus the 3 s a mode change may take.
+const PROBE_LIMIT: Duration = Duration::from_secs(30);
+
+pub fn probe(port: &Path) -> anyhow::Result<ExitCode> {
+    // Probing streams at the speed the sensor already supports everywhere
+    // (38400) and with the units and mode it most likely has, so that a
+    // sensor in its default configuration sees no EEPROM write.
+    let config = LinkConfig {
+        target_baud: Baud::B38400,
+        real_time_indices: false,
+        ..LinkConfig::default()
+    };
+    let mut driver = SerialDriver::open(port, config)
+        .with_context(|| format!("cannot probe {}", port.display()))?;
+    let start = Instant::now();
+    let mut found = None;
+    let mut errors = Vec::new();
+    driver.run(
+        || start.elapsed() > PROBE_LIMIT,
+        |event| match event {
+            Event::Connected {
+                baud,
+                variant,
+                units,
+                device_type,
+                firmware,
+            } => {
+                found = Some((
+                    *baud,
+                    *variant,
+                    *units,
+                    device_type.clone(),
+                    firmware.clone(),
+                ));
+                ControlFlow::Continue(())
+            }
+            Event::Scan(s) if found.is_some() => {
+                let scan = &s.scan;
+                println!("port:      {}", port.display());
+                if let Some((baud, variant, units, device, firmware)) = &found {
+                    println!("device:    {device} (firmware {firmware})");
+                    println!("variant:   {}", variant_name(*variant));
+                    println!("units:     {}", units_name(*units));
+                    println!("streaming: {} Bd", baud.bits_per_second());
+                }
+                println!("scan:      {} values", scan.values.len());
+                ControlFlow::Break(())
+            }
+            Event::Error(e) => {
+                errors.push(e.to_string());
+                ControlFlow::Continue(())
+            }
+            _ => ControlFlow::Continue(()),
+        },
+    )?;
+    if found.is_none() {
+        let why = errors.last().cloned().unwrap_or_else(|| "no answer".into());
+        bail!(
+            "no LMS200 found on {} within {} s: {why}",
+            port.display(),
+            PROBE_LIMIT.as_secs()
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn record(
+    port: &Path,
+    out: &Path,
+    scans: Option<u64>,
+    baud: u32,
+    variant: &str,
+    units: UnitsArg,
+) -> anyhow::Result<ExitCode> {
+    let baud = Baud::from_bits_per_second(baud)
+        .with_context(|| format!("{baud} Bd: the LMS200 runs at 9600, 19200, 38400 or 500000"))?;
+    let variant = parse_variant(variant)?;
+    let units = match units {
+        UnitsArg::Mm => Units::Mm,
+        UnitsArg::Cm => Units::Cm,
+    };
+    let config = LinkConfig {
+        variant,
+        units,
+        target_baud: baud,
+        ..LinkConfig::default()
+    };
+    let note = format!(
+        "lms200 variant={} units={} mode={:02x}",
+        variant_name(variant),
+        units_name(units),
+        config.measuring_mode.code()
+    );
+    let file = std::fs::File::create(out)
+        .with_context(|| format!("cannot create the recording {}", out.display()))?;
+    let mut driver = SerialDriver::open(port, config)
+        .with_context(|| format!("cannot open {}", port.display()))?
+        .with_recording(Box::new(BufWriter::new(file)), &note)?;
+    let stop = super::stop_flag()?;
+    let mut count = 0u64;
+    driver.run(
+        || stop.load(Ordering::SeqCst),
+        |event| {
+            match event {
+                Event::Connected { baud, .. } => {
+                    tracing::info!(
+                        baud = baud.bits_per_second(),
+                        "streaming, recording to {}",
+                        out.display()
+                    )
+                }
+                Event::Scan(_) => count += 1,
+                Event::Error(e) => tracing::warn!("{e}"),
+                Event::SensorSilent => tracing::warn!("sensor silent, re-initialising"),
+                Event::SensorRestarted => tracing::warn!("sensor restarted, re-initialising"),
+                _ => {}
+            }
+            if scans.is_some_and(|n| count >= n) {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
+            }
+        },
+    )?;
+    let stats = driver.stats();
+    eprintln!(
+        "recorded {count} scans to {}; dropped frames {}, lost telegrams {}, re-initialisations {}",
+        out.display(),
+        stats.dropped_frames,
+        stats.lost_telegrams,
+        stats.reinits
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// One decoded scan as `decode` prints it.
+#[derive(Debug, Serialize)]
+struct DecodedScan {
+    /// Mid-sweep time (s since the Unix epoch; byte offset order for raw dumps).
+    t: f64,
+    units: &'static str,
+    /// Distance field of each value in `units`, as sent; special codes kept
+    /// as their raw numbers.
+    ranges: Vec<u16>,
+    /// Flag bits of each value (the bits above the distance field).
+    flags: Vec<u16>,
+    status: u8,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    scan_index: Option<u8>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    telegram_index: Option<u8>,
+}
+
+pub fn decode(
+    file: &Path,
+    raw: bool,
+    format: DecodeFormat,
+    mode_arg: Option<u8>,
+) -> anyhow::Result<ExitCode> {
+    let mut mode = match mode_arg {
+        Some(code) => MeasuringMode::from_code(code)
+            .with_context(|| format!("measuring mode {code:02x} is reserved"))?,
+        None => MeasuringMode::Bits13FieldsAbDazzle,
+    };
+    let input =
+        std::fs::File::open(file).with_context(|| format!("cannot open {}", file.display()))?;
+    let stdout = std::io::stdout();
+    let mut out = BufWriter::new(stdout.lock());
+    if format == DecodeFormat::Csv {
+        writeln!(out, "t,beam,units,range,flags,status")?;
+    }
+    let mut decoder = Decoder::new();
+    let mut printed = 0u64;
+    let mut emit = |scan: &Scan, status: u8, t: f64, mode: MeasuringMode| -> anyhow::Result<()> {
+        let decoded = decoded_scan(scan, status, t, mode);
+        match format {
+            DecodeFormat::Jsonl => {
+                serde_json::to_writer(&mut out, &decoded).map_err(std::io::Error::from)?;
+                writeln!(out)?;
+            }
+            DecodeFormat::Csv => {
+                for (i, (r, f)) in decoded.ranges.iter().zip(&decoded.flags).enumerate() {
+                    writeln!(
+                        out,
+                        "{:.6},{i},{},{r},{f},{}",
+                        decoded.t, decoded.units, decoded.status
+                    )?;
+                }
+            }
+        }
+        printed += 1;
+        Ok(())
+    };
+    let mut broke = None;
+    if raw {
+        let mut bytes = Vec::new();
+        std::io::BufReader::new(input)
+            .read_to_end(&mut bytes)
+            .with_context(|| format!("cannot read {}", file.display()))?;
+        let mut scans = Vec::new();
+        decoder.feed(&bytes, |ev| collect_scan(ev, &mut scans));
+        for (i, (scan, status)) in scans.iter().enumerate() {
+            // A raw dump has no clock: number the scans instead.
+            emit(scan, *status, i as f64, mode)?;
+        }
+    } else {
+        let reader = RecordingReader::new(std::io::BufReader::new(input))
+            .with_context(|| format!("cannot read {}", file.display()))?;
+        let mut baud = Baud::B9600;
+        for record in reader {
+            let record = match record {
+                Ok(r) => r,
+                Err(e) => {
+                    broke = Some(e);
+                    break;
+                }
+            };
+            match record {
+                Record::Note { text, .. } if mode_arg.is_none() => {
+                    if let Some(m) = note_mode(&text) {
+                        mode = m;
+                    }
+                }
+                Record::Baud { baud: bps, .. } => {
+                    if let Some(b) = Baud::from_bits_per_second(bps) {
+                        baud = b;
+                    }
+                }
+                Record::Rx { t_us, bytes } => {
+                    let mut scans = Vec::new();
+                    decoder.feed(&bytes, |ev| collect_scan(ev, &mut scans));
+                    for (scan, status) in scans {
+                        let t = scan_time(t_us as f64 * 1e-6, &scan, baud);
+                        emit(&scan, status, t, mode)?;
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+    out.flush()?;
+    let stats = decoder.stats();
+    eprintln!(
+        "{printed} scans; {} frames dropped (bad checksum {}, impossible length {}, implausible {}, truncated {}), {} junk bytes",
+        stats.bad_crc
+            + stats.impossible_length
+            + stats.length_mismatch
+            + stats.implausible
+            + stats.truncated,
+        stats.bad_crc,
+        stats.impossible_length,
+        stats.implausible,
+        stats.truncated,
+        stats.junk_bytes
+    );
+    if let Some(e) = broke {
+        // Everything before the break was printed; say where it broke.
+        return Err(anyhow::Error::new(e).context(format!(
+            "{}: decoded {printed} scans before the recording broke",
+            file.display()
+        )));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn collect_scan(ev: DecodeEvent, scans: &mut Vec<(Scan, u8)>) {
+    if let DecodeEvent::Reply(frame) = ev {
+        if let Reply::ScanData(scan) = frame.reply {
+            scans.push((scan, frame.status.0));
+        }
+    }
+}
+
+fn decoded_scan(scan: &Scan, status: u8, t: f64, mode: MeasuringMode) -> DecodedScan {
+    let mask = mode.distance_mask();
+    DecodedScan {
+        t,
+        units: scan.units().map(units_name).unwrap_or("reserved"),
+        ranges: scan.values.iter().map(|v| v & mask).collect(),
+        flags: scan
+            .values
+            .iter()
+            .map(|v| v.checked_shr(mode.distance_bits()).unwrap_or(0))
+            .collect(),
+        status,
+        scan_index: scan.indices.map(|i| i.scan),
+        telegram_index: scan.indices.map(|i| i.telegram),
+    }
+}
+
+pub fn parse_variant(s: &str) -> anyhow::Result<Variant> {
+    Variant::ALL
+        .into_iter()
+        .find(|v| variant_name(*v) == s.trim())
+        .with_context(|| {
+            let names: Vec<String> = Variant::ALL.into_iter().map(variant_name).collect();
+            format!("variant `{s}`: the LMS200 offers {}", names.join(", "))
+        })
+}
+
+fn variant_name(v: Variant) -> String {
+    format!(
+        "{}/{}",
+        v.fov_deg(),
+        f64::from(v.resolution_centideg()) / 100.0
+    )
+}
+
+fn units_name(u: Units) -> &'static str {
+    match u {
+        Units::Mm => "mm",
+        Units::Cm => "cm",
+    }
+}
+
+/// Byte-level faults for `emulate`.
+#[derive(Debug, Clone, Copy)]
+pub struct LineFaults {
+    pub bit_flips: f64,
+    pub garbage: f64,
+    pub drops: f64,
+    pub seed: u64,
+}
+
+pub fn emulate(
+    link: Option<&Path>,
+    start_baud: Option<u32>,
+    faults: LineFaults,
+) -> anyhow::Result<ExitCode> {
+    for (name, p) in [
+        ("--bit-flips", faults.bit_flips),
+        ("--garbage", faults.garbage),
+        ("--drops", faults.drops),
+    ] {
+        if !(0.0..=1.0).contains(&p) {
+            bail!("{name} {p}: a probability per byte lies in [0, 1]");
+        }
+    }
+    let mut config = EmulatorConfig {
+        seed: faults.seed,
+        faults: FaultConfig {
+            bit_flip_per_byte: faults.bit_flips,
+            garbage_per_byte: faults.garbage,
+            drop_per_byte: faults.drops,
+            nak_every_nth_request: None,
+        },
+        ..EmulatorConfig::default()
+    };
+    if let Some(bps) = start_baud {
+        config.start_baud = Baud::from_bits_per_second(bps).with_context(|| {
+            format!("{bps} Bd: the LMS200 runs at 9600, 19200, 38400 or 500000")
+        })?;
+    }
+    let stop = super::stop_flag()?;
+    let pty = PtyEmulator::spawn(Emulator::new(config, Instant::now()), link)
+        .context("cannot start the emulator")?;
+    match link {
+        Some(l) => println!(
+            "LMS200 emulator on {} (link {})",
+            pty.tty_path().display(),
+            l.display()
+        ),
+        None => println!("LMS200 emulator on {}", pty.tty_path().display()),
+    }
+    println!(
+        "try: clsmap probe --port {}",
+        link.unwrap_or(pty.tty_path()).display()
+    );
+    std::io::stdout().flush()?;
+    while !stop.load(Ordering::SeqCst) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let stats = pty.stats();
+    pty.stop().context("emulator failed")?;
+    eprintln!("emulator stopped: {stats:?}");
+    Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn variants_parse_by_name() {
+        assert_eq!(parse_variant("180/0.5").unwrap(), Variant::Fov180Res50);
+        assert_eq!(parse_variant("100/0.25").unwrap(), Variant::Fov100Res25);
+        let err = parse_variant("270/0.5").unwrap_err().to_string();
+        assert!(err.contains("180/0.5") && err.contains("100/1"), "{err}");
+    }
+}

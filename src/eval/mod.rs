@@ -1,0 +1,8 @@
+//! Accuracy evaluation of estimated trajectories.
+
+pub mod relations;
+
+pub use relations::{
+    ErrorStats, EvalError, RELATION_TIME_TOLERANCE, Relation, RelationErrors, evaluate,
+    evaluate_relations, read_relations,
+};

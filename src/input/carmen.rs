@@ -1,0 +1,596 @@
+//! CARMEN log files (`.clf`): laser scans and odometry, streamed line by line.
+//!
+//! Record layouts read here (whitespace separated; angles rad, lengths m,
+//! times s; `ipc_timestamp` is the scan time used everywhere):
+//!
+//! ```text
+//! ODOM        x y theta tv rv accel                        ipc_t host logger_t
+//! FLASER      n r_1..r_n  x y theta  odom_x odom_y odom_theta  ipc_t host logger_t
+//! RAWLASERk   type start_angle fov resolution max_range accuracy remission_mode
+//!             n r_1..r_n  m rem_1..rem_m                   ipc_t host logger_t
+//! ROBOTLASER1 type start_angle fov resolution max_range accuracy remission_mode
+//!             n r_1..r_n  m rem_1..rem_m
+//!             laser_x laser_y laser_theta  robot_x robot_y robot_theta
+//!             tv rv forward_safety side_safety turn_axis   ipc_t host logger_t
+//! ```
+//!
+//! FLASER beams span 180° from −90° (the old front-laser message carries no
+//! geometry). FLASER's odometry is the `odom_*` triple (`x y theta` may be a
+//! corrected pose), ROBOTLASER1's is the robot pose. RAWLASER lines carry no
+//! pose: their odometry is interpolated from the ODOM lines around them.
+//! Comments (`#`), blank lines and other record types are skipped.
+
+use super::odometry::OdometryTrack;
+use super::{InputError, ScanRecord};
+use crate::geometry::{BeamFault, Pose2, RangeScan};
+use std::collections::VecDeque;
+use std::f64::consts::PI;
+use std::io::BufRead;
+use thiserror::Error;
+
+/// Ranges at or above this (m) are the "no return" code of SICK logs
+/// (8191 cm written as 81.91 m), never a real echo.
+pub const NO_RETURN_RANGE: f64 = 81.9;
+
+/// Beam counts above this are refused: no planar scanner of the field gives
+/// more, and a corrupt count must not drive a huge allocation.
+const MAX_BEAMS: usize = 100_000;
+
+/// What is wrong with one line of a CARMEN log.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum MalformedLine {
+    #[error("line is not valid UTF-8")]
+    NotUtf8,
+    #[error("{record}: missing field `{field}`")]
+    MissingField {
+        record: &'static str,
+        field: &'static str,
+    },
+    #[error("{record}: field `{field}` is not a finite number: {text:?}")]
+    BadNumber {
+        record: &'static str,
+        field: &'static str,
+        text: String,
+    },
+    #[error("{record}: field `{field}` is not a count: {text:?}")]
+    BadCount {
+        record: &'static str,
+        field: &'static str,
+        text: String,
+    },
+    #[error("{record}: angular resolution {resolution} rad is not positive")]
+    BadResolution {
+        record: &'static str,
+        resolution: f64,
+    },
+    #[error("{record}: {extra} unexpected field(s) after the logger timestamp")]
+    TrailingFields { record: &'static str, extra: usize },
+}
+
+/// One useful line of a CARMEN log.
+#[derive(Debug, Clone, PartialEq)]
+pub enum CarmenEntry {
+    /// A laser scan, with the odometry pose the line itself carries (if any).
+    Laser {
+        scan: RangeScan,
+        odometry: Option<Pose2>,
+    },
+    /// A standalone odometry sample.
+    Odometry { t: f64, pose: Pose2 },
+}
+
+/// Converts one logged range (m) into a beam: the no-return code, zero,
+/// negative or non-finite values and readings at the sensor's declared
+/// maximum range carry no echo.
+fn beam(range: f64, max_range: Option<f64>) -> Result<f64, BeamFault> {
+    let at_max = max_range.is_some_and(|m| m > 0.0 && range >= m);
+    if !range.is_finite() || range <= 0.0 || range >= NO_RETURN_RANGE || at_max {
+        Err(BeamFault::NoReturn)
+    } else {
+        Ok(range)
+    }
+}
+
+/// A cursor over a line's fields that names what it expected when it fails.
+struct Fields<'a> {
+    record: &'static str,
+    it: std::str::SplitAsciiWhitespace<'a>,
+}
+
+impl<'a> Fields<'a> {
+    fn text(&mut self, field: &'static str) -> Result<&'a str, MalformedLine> {
+        self.it.next().ok_or(MalformedLine::MissingField {
+            record: self.record,
+            field,
+        })
+    }
+
+    fn number(&mut self, field: &'static str) -> Result<f64, MalformedLine> {
+        let text = self.text(field)?;
+        match text.parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            _ => Err(MalformedLine::BadNumber {
+                record: self.record,
+                field,
+                text: text.to_owned(),
+            }),
+        }
+    }
+
+    /// A range: parsed like a number, but "inf"/"nan" are kept (as
+    /// no-return beams) rather than refused.
+    fn range(&mut self) -> Result<f64, MalformedLine> {
+        let text = self.text("range")?;
+        text.parse::<f64>().map_err(|_| MalformedLine::BadNumber {
+            record: self.record,
+            field: "range",
+            text: text.to_owned(),
+        })
+    }
+
+    fn count(&mut self, field: &'static str) -> Result<usize, MalformedLine> {
+        let text = self.text(field)?;
+        match text.parse::<usize>() {
+            Ok(n) if n <= MAX_BEAMS => Ok(n),
+            _ => Err(MalformedLine::BadCount {
+                record: self.record,
+                field,
+                text: text.to_owned(),
+            }),
+        }
+    }
+
+    fn pose(
+        &mut self,
+        x: &'static str,
+        y: &'static str,
+        theta: &'static str,
+    ) -> Result<Pose2, MalformedLine> {
+        Ok(Pose2::new(
+            self.number(x)?,
+            self.number(y)?,
+            self.number(theta)?,
+        ))
+    }
+
+    fn ranges(
+        &mut self,
+        n: usize,
+        max_range: Option<f64>,
+    ) -> Result<Vec<Result<f64, BeamFault>>, MalformedLine> {
+        (0..n)
+            .map(|_| self.range().map(|r| beam(r, max_range)))
+            .collect()
+    }
+
+    /// `ipc_timestamp ipc_hostname logger_timestamp`, then end of line;
+    /// returns the ipc timestamp (s).
+    fn tail(&mut self) -> Result<f64, MalformedLine> {
+        let t = self.number("ipc_timestamp")?;
+        self.text("ipc_hostname")?;
+        self.number("logger_timestamp")?;
+        let extra = self.it.by_ref().count();
+        if extra > 0 {
+            return Err(MalformedLine::TrailingFields {
+                record: self.record,
+                extra,
+            });
+        }
+        Ok(t)
+    }
+}
+
+/// Parses one line. `Ok(None)` for comments, blank lines and record types
+/// the mapper does not use.
+pub fn parse_line(line: &str) -> Result<Option<CarmenEntry>, MalformedLine> {
+    let mut words = line.split_ascii_whitespace();
+    let Some(tag) = words.next() else {
+        return Ok(None);
+    };
+    if tag.starts_with('#') {
+        return Ok(None);
+    }
+    let record: &'static str = match tag {
+        "ODOM" => "ODOM",
+        "FLASER" => "FLASER",
+        "RAWLASER1" => "RAWLASER1",
+        "RAWLASER2" => "RAWLASER2",
+        "RAWLASER3" => "RAWLASER3",
+        "RAWLASER4" => "RAWLASER4",
+        "ROBOTLASER1" => "ROBOTLASER1",
+        _ => return Ok(None),
+    };
+    let mut f = Fields { record, it: words };
+    let entry = match record {
+        "ODOM" => {
+            let pose = f.pose("x", "y", "theta")?;
+            f.number("tv")?;
+            f.number("rv")?;
+            f.number("accel")?;
+            let t = f.tail()?;
+            CarmenEntry::Odometry { t, pose }
+        }
+        "FLASER" => {
+            let n = f.count("num_readings")?;
+            let ranges = f.ranges(n, None)?;
+            f.pose("x", "y", "theta")?;
+            let odom = f.pose("odom_x", "odom_y", "odom_theta")?;
+            let t = f.tail()?;
+            let angle_increment = if n > 1 { PI / (n - 1) as f64 } else { PI };
+            CarmenEntry::Laser {
+                scan: RangeScan {
+                    t,
+                    angle_min: -PI / 2.0,
+                    angle_increment,
+                    ranges,
+                },
+                odometry: Some(odom),
+            }
+        }
+        _ => {
+            // RAWLASERk and ROBOTLASER1 share the laser header.
+            f.number("laser_type")?;
+            let angle_min = f.number("start_angle")?;
+            f.number("field_of_view")?;
+            let resolution = f.number("angular_resolution")?;
+            if resolution <= 0.0 {
+                return Err(MalformedLine::BadResolution { record, resolution });
+            }
+            let max_range = f.number("maximum_range")?;
+            f.number("accuracy")?;
+            f.number("remission_mode")?;
+            let n = f.count("num_readings")?;
+            let ranges = f.ranges(n, Some(max_range))?;
+            let n_remissions = f.count("num_remissions")?;
+            for _ in 0..n_remissions {
+                f.number("remission")?;
+            }
+            let odometry = if record == "ROBOTLASER1" {
+                f.pose("laser_pose_x", "laser_pose_y", "laser_pose_theta")?;
+                let robot = f.pose("robot_pose_x", "robot_pose_y", "robot_pose_theta")?;
+                for field in [
+                    "laser_tv",
+                    "laser_rv",
+                    "forward_safety_dist",
+                    "side_safety_dist",
+                    "turn_axis",
+                ] {
+                    f.number(field)?;
+                }
+                Some(robot)
+            } else {
+                None
+            };
+            let t = f.tail()?;
+            CarmenEntry::Laser {
+                scan: RangeScan {
+                    t,
+                    angle_min,
+                    angle_increment: resolution,
+                    ranges,
+                },
+                odometry,
+            }
+        }
+    };
+    Ok(Some(entry))
+}
+
+/// Streams the scans of a CARMEN log with the odometry pose at each scan.
+///
+/// Scans are yielded in file order. A scan whose line carries no pose
+/// (RAWLASER) waits until an ODOM sample at or after its time has been read
+/// (or the file ends), so its odometry is interpolated, not guessed; memory
+/// stays bounded by the scans between two odometry samples.
+#[derive(Debug)]
+pub struct CarmenScans<R> {
+    reader: R,
+    line_no: usize,
+    buf: Vec<u8>,
+    /// Scans read but not yet yielded; `None` odometry = still to interpolate.
+    pending: VecDeque<(RangeScan, Option<Pose2>)>,
+    odometry: OdometryTrack,
+    finished: bool,
+}
+
+impl<R: BufRead> CarmenScans<R> {
+    pub fn new(reader: R) -> Self {
+        CarmenScans {
+            reader,
+            line_no: 0,
+            buf: Vec::new(),
+            pending: VecDeque::new(),
+            odometry: OdometryTrack::new(),
+            finished: false,
+        }
+    }
+
+    /// The front scan, if it can be yielded now.
+    fn ready(&mut self) -> Option<ScanRecord> {
+        let (scan, own) = self.pending.front()?;
+        let odometry = match own {
+            Some(p) => Some(*p),
+            None => {
+                let resolved = self.odometry.last_time().is_some_and(|last| last >= scan.t);
+                if !resolved && !self.finished {
+                    return None;
+                }
+                self.odometry.at(scan.t)
+            }
+        };
+        let (scan, _) = self.pending.pop_front()?;
+        if let Some(next) = self.pending.front() {
+            self.odometry.discard_before(next.0.t);
+        }
+        Some(ScanRecord { scan, odometry })
+    }
+
+    /// Reads one line into the pending queue or the odometry track.
+    fn read_one(&mut self) -> Result<(), InputError> {
+        self.buf.clear();
+        let n = self
+            .reader
+            .read_until(b'\n', &mut self.buf)
+            .map_err(|source| InputError::Read {
+                line: self.line_no + 1,
+                source,
+            })?;
+        if n == 0 {
+            self.finished = true;
+            return Ok(());
+        }
+        self.line_no += 1;
+        let line = self.line_no;
+        let text = std::str::from_utf8(&self.buf).map_err(|_| InputError::Malformed {
+            line,
+            kind: MalformedLine::NotUtf8,
+        })?;
+        match parse_line(text).map_err(|kind| InputError::Malformed { line, kind })? {
+            Some(CarmenEntry::Laser { scan, odometry }) => self.pending.push_back((scan, odometry)),
+            Some(CarmenEntry::Odometry { t, pose }) => self
+                .odometry
+                .push(t, pose)
+                .map_err(|error| InputError::Odometry { line, error })?,
+            None => {}
+        }
+        Ok(())
+    }
+}
+
+impl<R: BufRead> Iterator for CarmenScans<R> {
+    type Item = Result<ScanRecord, InputError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            if let Some(record) = self.ready() {
+                return Some(Ok(record));
+            }
+            if self.finished {
+                return None;
+            }
+            if let Err(e) = self.read_one() {
+                // Stop after an error: the caller decides whether to go on
+                // by opening the log again; partial state is not trusted.
+                self.finished = true;
+                self.pending.clear();
+                return Some(Err(e));
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    fn flaser(ranges: &[&str], odom: (f64, f64, f64), t: f64) -> String {
+        format!(
+            "FLASER {} {} 9.0 9.0 0.0 {} {} {} {t} b21 0.5\n",
+            ranges.len(),
+            ranges.join(" "),
+            odom.0,
+            odom.1,
+            odom.2
+        )
+    }
+
+    fn scans(text: &str) -> Vec<Result<ScanRecord, InputError>> {
+        CarmenScans::new(text.as_bytes()).collect()
+    }
+
+    #[test]
+    fn flaser_spans_180_degrees_and_marks_no_return() {
+        let line = flaser(
+            &["1.00", "81.91", "2.50"],
+            (576.5, 0.1, -2.2),
+            1134864629.895182,
+        );
+        let Some(CarmenEntry::Laser { scan, odometry }) = parse_line(&line).unwrap() else {
+            panic!("not a laser entry");
+        };
+        assert_eq!(scan.t, 1134864629.895182);
+        assert_eq!(scan.angle_min, -PI / 2.0);
+        assert!((scan.fov() - PI).abs() < 1e-12);
+        assert_eq!(
+            scan.ranges,
+            vec![Ok(1.0), Err(BeamFault::NoReturn), Ok(2.5)]
+        );
+        assert_eq!(odometry, Some(Pose2::new(576.5, 0.1, -2.2)));
+    }
+
+    #[test]
+    fn no_return_threshold_and_invalid_values() {
+        assert_eq!(beam(81.91, None), Err(BeamFault::NoReturn));
+        assert_eq!(beam(81.9, None), Err(BeamFault::NoReturn));
+        assert_eq!(beam(81.89, None), Ok(81.89));
+        assert_eq!(beam(0.0, None), Err(BeamFault::NoReturn));
+        assert_eq!(beam(f64::INFINITY, None), Err(BeamFault::NoReturn));
+        assert_eq!(beam(8.0, Some(8.0)), Err(BeamFault::NoReturn));
+        assert_eq!(beam(7.99, Some(8.0)), Ok(7.99));
+    }
+
+    #[test]
+    fn rawlaser_carries_its_own_geometry() {
+        let line = "RAWLASER1 0 -1.5 3.0 0.0175 8.0 0.01 0 3 1.0 8.0 2.0 \
+                    2 100 200 12.5 host 12.6";
+        let Some(CarmenEntry::Laser { scan, odometry }) = parse_line(line).unwrap() else {
+            panic!("not a laser entry");
+        };
+        assert_eq!(scan.angle_min, -1.5);
+        assert_eq!(scan.angle_increment, 0.0175);
+        assert_eq!(
+            scan.ranges,
+            vec![Ok(1.0), Err(BeamFault::NoReturn), Ok(2.0)]
+        );
+        assert_eq!(scan.t, 12.5);
+        assert_eq!(odometry, None);
+    }
+
+    #[test]
+    fn robotlaser_uses_the_robot_pose_as_odometry() {
+        let line = "ROBOTLASER1 0 -1.5708 3.1416 0.5 81.9 0.01 0 2 1.5 2.5 0 \
+                    1.1 2.1 0.3 1.0 2.0 0.3 0.2 0.0 0.5 0.2 0.0 7.25 host 7.3";
+        let Some(CarmenEntry::Laser { scan, odometry }) = parse_line(line).unwrap() else {
+            panic!("not a laser entry");
+        };
+        assert_eq!(scan.ranges, vec![Ok(1.5), Ok(2.5)]);
+        assert_eq!(odometry, Some(Pose2::new(1.0, 2.0, 0.3)));
+        assert_eq!(scan.t, 7.25);
+    }
+
+    #[test]
+    fn odom_line_parses() {
+        let e = parse_line("ODOM 1.0 2.0 0.5 0.3 0.0 0.0 100.25 host 100.3").unwrap();
+        assert_eq!(
+            e,
+            Some(CarmenEntry::Odometry {
+                t: 100.25,
+                pose: Pose2::new(1.0, 2.0, 0.5)
+            })
+        );
+    }
+
+    #[test]
+    fn comments_blank_and_unknown_lines_are_skipped() {
+        for line in [
+            "# FLASER 3 1 2",
+            "",
+            "   \t",
+            "PARAM robot_width 0.5 1.0 host 1.0",
+            "RLASER 1 2",
+        ] {
+            assert_eq!(parse_line(line), Ok(None), "{line:?}");
+        }
+    }
+
+    #[test]
+    fn malformed_lines_name_the_problem() {
+        let cases: &[(&str, MalformedLine)] = &[
+            (
+                "FLASER 3 1.0 2.0",
+                MalformedLine::MissingField {
+                    record: "FLASER",
+                    field: "range",
+                },
+            ),
+            (
+                "FLASER 1 1.0 0 0 0 0 0 0 abc host 1.0",
+                MalformedLine::BadNumber {
+                    record: "FLASER",
+                    field: "ipc_timestamp",
+                    text: "abc".into(),
+                },
+            ),
+            (
+                "FLASER -2 1.0",
+                MalformedLine::BadCount {
+                    record: "FLASER",
+                    field: "num_readings",
+                    text: "-2".into(),
+                },
+            ),
+            (
+                "ODOM 1 2 3 0 0 0 5.0 host 5.0 extra",
+                MalformedLine::TrailingFields {
+                    record: "ODOM",
+                    extra: 1,
+                },
+            ),
+            (
+                "RAWLASER2 0 -1.57 3.14 0 8 0.01 0 0 0 1.0 h 1.0",
+                MalformedLine::BadResolution {
+                    record: "RAWLASER2",
+                    resolution: 0.0,
+                },
+            ),
+        ];
+        for (line, want) in cases {
+            assert_eq!(parse_line(line).as_ref(), Err(want), "{line:?}");
+        }
+    }
+
+    #[test]
+    fn stream_reports_the_line_number_of_a_malformed_line() {
+        let text = format!(
+            "# comment\n{}FLASER 2 1.0 nope 0 0 0 0 0 0 2.0 h 2.0\n{}",
+            flaser(&["1.0"], (0.0, 0.0, 0.0), 1.0),
+            flaser(&["1.0"], (0.0, 0.0, 0.0), 3.0)
+        );
+        let out = scans(&text);
+        assert_eq!(out.len(), 2, "one scan, then the error, then nothing");
+        assert!(out[0].is_ok());
+        let err = out[1].as_ref().unwrap_err();
+        assert!(
+            matches!(err, InputError::Malformed { line: 3, .. }),
+            "{err}"
+        );
+        assert!(err.to_string().starts_with("line 3: FLASER"), "{err}");
+    }
+
+    #[test]
+    fn non_utf8_line_is_an_error_with_its_number() {
+        let mut bytes = flaser(&["1.0"], (0.0, 0.0, 0.0), 1.0).into_bytes();
+        bytes.extend_from_slice(b"FLASER \xff\n");
+        let out: Vec<_> = CarmenScans::new(&bytes[..]).collect();
+        assert!(matches!(
+            out[1],
+            Err(InputError::Malformed {
+                line: 2,
+                kind: MalformedLine::NotUtf8
+            })
+        ));
+    }
+
+    #[test]
+    fn rawlaser_odometry_is_interpolated_from_odom_lines() {
+        let text = "ODOM 0.0 0.0 0.0 0 0 0 10.0 h 10.0\n\
+                    RAWLASER1 0 -1.57 3.14 0.5 80 0.01 0 1 1.0 0 10.5 h 10.5\n\
+                    RAWLASER1 0 -1.57 3.14 0.5 80 0.01 0 1 1.0 0 10.75 h 10.75\n\
+                    ODOM 1.0 0.0 0.2 0 0 0 11.0 h 11.0\n\
+                    RAWLASER1 0 -1.57 3.14 0.5 80 0.01 0 1 1.0 0 12.0 h 12.0\n";
+        let out: Vec<ScanRecord> = scans(text).into_iter().map(Result::unwrap).collect();
+        let times: Vec<f64> = out.iter().map(|r| r.scan.t).collect();
+        assert_eq!(times, vec![10.5, 10.75, 12.0]);
+        let p = out[0].odometry.unwrap();
+        assert!((p.x - 0.5).abs() < 1e-12 && (p.theta - 0.1).abs() < 1e-12);
+        assert!((out[1].odometry.unwrap().x - 0.75).abs() < 1e-12);
+        // After the last ODOM the newest sample is held.
+        assert_eq!(out[2].odometry, Some(Pose2::new(1.0, 0.0, 0.2)));
+    }
+
+    #[test]
+    fn log_without_odometry_yields_scans_without_odometry() {
+        let text = "RAWLASER1 0 -1.57 3.14 0.5 80 0.01 0 1 1.0 0 1.0 h 1.0\n";
+        let out: Vec<ScanRecord> = scans(text).into_iter().map(Result::unwrap).collect();
+        assert_eq!(out.len(), 1);
+        assert_eq!(out[0].odometry, None);
+    }
+
+    #[test]
+    fn out_of_order_odometry_is_an_error_with_its_line() {
+        let text = "ODOM 0 0 0 0 0 0 10.0 h 10.0\nODOM 0 0 0 0 0 0 9.0 h 9.0\n";
+        let out = scans(text);
+        assert!(matches!(out[0], Err(InputError::Odometry { line: 2, .. })));
+    }
+}

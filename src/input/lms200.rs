@@ -1,0 +1,311 @@
+//! LMS200 telegrams as range scans: the conversion from raw `B0` values to
+//! SI, and recordings (`clsmap record`, the daemon's fixtures) read as a
+//! stream of scans with the odometry interpolated at each scan's time.
+
+use std::collections::VecDeque;
+use std::io::Read;
+
+use lms200::link::{scan_frame_len, timing};
+use lms200::recording::{Record, RecordingError, RecordingReader};
+use lms200::{
+    Baud, DecodeEvent, Decoder, Measurement, MeasuringMode, Reply, Scan, SpecialCode, Variant,
+};
+
+use super::{InputError, ScanRecord};
+use crate::geometry::{BeamFault, Pose2, RangeScan};
+use crate::input::odometry::OdometryTrack;
+
+/// The variant a complete scan was taken with, from its number of values.
+/// Partial (interlaced) scans have none.
+pub fn scan_variant(scan: &Scan) -> Option<Variant> {
+    if scan.count_word.is_partial() {
+        return None;
+    }
+    Variant::ALL
+        .into_iter()
+        .find(|v| usize::from(v.value_count()) == scan.values.len())
+}
+
+/// Converts a complete scan taken at `t` (s) under measuring `mode` into
+/// SI units. `None` for partial scans, reserved units or reflectivity mode.
+pub fn range_scan(scan: &Scan, t: f64, mode: MeasuringMode) -> Option<RangeScan> {
+    let variant = scan_variant(scan)?;
+    let metres = scan.units()?.metres_per_unit();
+    if !mode.is_distance() {
+        return None;
+    }
+    let ranges = scan
+        .values
+        .iter()
+        .map(|&v| match Measurement::from_value(v, mode) {
+            Measurement::Distance(d) => Ok(f64::from(d) * metres),
+            Measurement::Special(SpecialCode::NotValid) => Err(BeamFault::NoReturn),
+            Measurement::Special(SpecialCode::AboveMaximum) => Err(BeamFault::OutOfRange),
+            Measurement::Special(_) | Measurement::Undefined(_) | Measurement::Reflectivity(_) => {
+                Err(BeamFault::SensorCode)
+            }
+        })
+        .collect();
+    Some(RangeScan {
+        t,
+        angle_min: variant.beam_angle_rad(0),
+        angle_increment: f64::from(variant.resolution_centideg()).to_radians() / 100.0,
+        ranges,
+    })
+}
+
+/// Mid-sweep time (s) of a complete scan whose telegram ended at `t_end`
+/// (s) on a line at `baud`: the model of [`lms200::link::timing`]. A
+/// partial scan keeps `t_end`.
+pub fn scan_time(t_end: f64, scan: &Scan, baud: Baud) -> f64 {
+    let Some(variant) = scan_variant(scan) else {
+        return t_end;
+    };
+    let frame_len = scan_frame_len(variant, scan.indices.is_some());
+    let back = timing::wire_time(frame_len, baud) + timing::mid_sweep_to_end(variant);
+    t_end - back.as_secs_f64()
+}
+
+/// The measuring mode named in a recording's note (`mode=04`), which
+/// decides which bits of a value are distance.
+pub fn note_mode(text: &str) -> Option<MeasuringMode> {
+    text.split_whitespace()
+        .find_map(|w| w.strip_prefix("mode="))
+        .and_then(|m| u8::from_str_radix(m, 16).ok())
+        .and_then(MeasuringMode::from_code)
+}
+
+/// A recording read as scans with odometry.
+///
+/// A scan is held back until an odometry sample at or after its time has
+/// been read, so that its odometry is interpolated, not extrapolated; at
+/// the end of the file the last sample is used. A recording without any
+/// odometry yields scans with `odometry: None`. A broken recording yields
+/// every whole scan before the break, then the error.
+#[derive(Debug)]
+pub struct RecordingScans<R: Read> {
+    records: RecordingReader<R>,
+    decoder: Decoder,
+    mode: MeasuringMode,
+    baud: Baud,
+    odometry: OdometryTrack,
+    waiting: VecDeque<RangeScan>,
+    error: Option<InputError>,
+    ended: bool,
+}
+
+impl<R: Read> RecordingScans<R> {
+    /// Reads the recording's signature; fails for a file that is not one.
+    pub fn new(input: R) -> Result<Self, RecordingError> {
+        Ok(RecordingScans {
+            records: RecordingReader::new(input)?,
+            decoder: Decoder::new(),
+            mode: MeasuringMode::Bits13FieldsAbDazzle,
+            baud: Baud::B9600,
+            odometry: OdometryTrack::new(),
+            waiting: VecDeque::new(),
+            error: None,
+            ended: false,
+        })
+    }
+
+    /// Frames the decoder dropped so far (corrupt or cut short on the line).
+    pub fn dropped_frames(&self) -> u64 {
+        let s = self.decoder.stats();
+        s.bad_crc + s.impossible_length + s.length_mismatch + s.implausible + s.truncated
+    }
+
+    fn ready(&self, t: f64) -> bool {
+        self.ended || self.odometry.last_time().is_some_and(|last| last >= t)
+    }
+
+    fn read_record(&mut self) {
+        match self.records.next_record() {
+            None => self.ended = true,
+            Some(Err(e)) => {
+                self.ended = true;
+                self.error = Some(InputError::Recording(e));
+            }
+            Some(Ok(record)) => match record {
+                Record::Rx { t_us, bytes } => {
+                    let t_end = t_us as f64 * 1e-6;
+                    let (mode, baud) = (self.mode, self.baud);
+                    let waiting = &mut self.waiting;
+                    self.decoder.feed(&bytes, |event| {
+                        if let DecodeEvent::Reply(frame) = event {
+                            if let Reply::ScanData(scan) = frame.reply {
+                                let t = scan_time(t_end, &scan, baud);
+                                if let Some(rs) = range_scan(&scan, t, mode) {
+                                    waiting.push_back(rs);
+                                }
+                            }
+                        }
+                    });
+                }
+                Record::Baud { baud, .. } => {
+                    if let Some(b) = Baud::from_bits_per_second(baud) {
+                        self.baud = b;
+                    }
+                }
+                Record::Note { text, .. } => {
+                    if let Some(m) = note_mode(&text) {
+                        self.mode = m;
+                    }
+                }
+                Record::Odometry { t_us, x, y, theta } => {
+                    let t = t_us as f64 * 1e-6;
+                    if let Err(error) = self.odometry.push(t, Pose2::new(x, y, theta)) {
+                        self.ended = true;
+                        self.error = Some(InputError::RecordingOdometry {
+                            offset: self.records.offset(),
+                            error,
+                        });
+                    }
+                }
+                Record::Tx { .. } => {}
+            },
+        }
+    }
+}
+
+impl<R: Read> Iterator for RecordingScans<R> {
+    type Item = Result<ScanRecord, InputError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            if let Some(t) = self.waiting.front().map(|s| s.t) {
+                if self.ready(t) {
+                    let scan = self.waiting.pop_front()?;
+                    let odometry = self.odometry.at(scan.t);
+                    // Keep one sample before the scan for the next interpolation.
+                    self.odometry.discard_before(scan.t);
+                    return Some(Ok(ScanRecord { scan, odometry }));
+                }
+            } else if self.ended {
+                return self.error.take().map(Err);
+            }
+            self.read_record();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use lms200::Units;
+    use lms200::recording::RecordingWriter;
+
+    fn telegram(values: Vec<u16>, units: Units) -> Vec<u8> {
+        lms200::ReplyFrame {
+            address: 0x80,
+            status: lms200::Status(0x10),
+            reply: Reply::ScanData(Scan::complete(values, units, None)),
+        }
+        .encode()
+        .unwrap()
+    }
+
+    #[test]
+    fn special_codes_become_faults_and_units_become_metres() {
+        let mut values = vec![1234u16; 361];
+        values[0] = 0x1FFF; // no return
+        values[1] = 0x1FF7; // above maximum
+        values[2] = 0x1FFE; // dazzled
+        values[3] = 0x2000 | 500; // 500 with the field-A flag
+        let scan = Scan::complete(values, Units::Cm, None);
+        let rs = range_scan(&scan, 1.0, MeasuringMode::Bits13FieldsAbDazzle).unwrap();
+        assert_eq!(rs.ranges.len(), 361);
+        assert_eq!(rs.ranges[0], Err(BeamFault::NoReturn));
+        assert_eq!(rs.ranges[1], Err(BeamFault::OutOfRange));
+        assert_eq!(rs.ranges[2], Err(BeamFault::SensorCode));
+        assert_eq!(rs.ranges[3], Ok(5.0));
+        assert_eq!(rs.ranges[4], Ok(12.34));
+        assert!((rs.angle_min + std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        assert!((rs.angle_increment - 0.5f64.to_radians()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn hundred_degree_scans_are_centred() {
+        let scan = Scan::complete(vec![1000; 201], Units::Mm, None);
+        let rs = range_scan(&scan, 0.0, MeasuringMode::Bits13FieldsAbDazzle).unwrap();
+        assert!((rs.angle_min + 50f64.to_radians()).abs() < 1e-12);
+        assert!((rs.angle(200) - 50f64.to_radians()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn recording_yields_scans_with_interpolated_odometry() {
+        let mut w = RecordingWriter::new(Vec::new()).unwrap();
+        w.write(&Record::Note {
+            t_us: 0,
+            text: "lms200 variant=180/0.5 units=mm mode=00".into(),
+        })
+        .unwrap();
+        w.write(&Record::Baud {
+            t_us: 0,
+            baud: 500_000,
+        })
+        .unwrap();
+        w.write(&Record::Odometry {
+            t_us: 1_000_000,
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+        })
+        .unwrap();
+        let bytes = telegram(vec![2000; 361], Units::Mm);
+        // Split a telegram across two chunks, as a serial read does.
+        w.write(&Record::Rx {
+            t_us: 1_040_000,
+            bytes: bytes[..100].to_vec(),
+        })
+        .unwrap();
+        w.write(&Record::Rx {
+            t_us: 1_050_000,
+            bytes: bytes[100..].to_vec(),
+        })
+        .unwrap();
+        w.write(&Record::Odometry {
+            t_us: 1_100_000,
+            x: 1.0,
+            y: 0.0,
+            theta: 0.0,
+        })
+        .unwrap();
+        let file = w.into_inner();
+        let records: Vec<ScanRecord> = RecordingScans::new(file.as_slice())
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        assert_eq!(records.len(), 1);
+        let expected_t = 1.05 - (732.0 * 10.0 / 500_000.0) - 0.00999;
+        assert!(
+            (records[0].scan.t - expected_t).abs() < 1e-5,
+            "{}",
+            records[0].scan.t
+        );
+        let odo = records[0].odometry.unwrap();
+        assert!((odo.x - (expected_t - 1.0) / 0.1).abs() < 1e-3, "{odo:?}");
+        assert_eq!(records[0].scan.ranges[0], Ok(2.0));
+    }
+
+    #[test]
+    fn a_truncated_recording_yields_whole_scans_then_the_error() {
+        let mut w = RecordingWriter::new(Vec::new()).unwrap();
+        let bytes = telegram(vec![1500; 181], Units::Cm);
+        for i in 0..3 {
+            w.write(&Record::Rx {
+                t_us: 1_000_000 * (i + 1),
+                bytes: bytes.clone(),
+            })
+            .unwrap();
+        }
+        let mut file = w.into_inner();
+        file.truncate(file.len() - 20);
+        let items: Vec<_> = RecordingScans::new(file.as_slice()).unwrap().collect();
+        assert_eq!(items.len(), 3);
+        assert!(items[0].is_ok() && items[1].is_ok());
+        assert!(items[0].as_ref().unwrap().odometry.is_none());
+        let err = items[2].as_ref().unwrap_err().to_string();
+        assert!(err.contains("truncated"), "{err}");
+    }
+}

@@ -1,0 +1,137 @@
+//! Offline inputs: logs turned into a stream of scans with the odometry
+//! pose at each scan.
+//!
+//! Every reader yields [`ScanRecord`]s through the [`LogSource`] iterator
+//! interface, so the mapping pipeline does not care whether scans come from
+//! a CARMEN log or (later) an LMS200 telegram recording.
+
+pub mod carmen;
+pub mod lms200;
+pub mod odometry;
+
+pub use carmen::{CarmenEntry, CarmenScans, MalformedLine, NO_RETURN_RANGE};
+pub use odometry::{OdometryError, OdometrySample, OdometryTrack};
+
+use crate::geometry::{Pose2, RangeScan};
+use std::cell::Cell;
+use std::fs::File;
+use std::io::{BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::rc::Rc;
+use thiserror::Error;
+
+/// One scan and the odometry pose (odometry frame, m/rad) at the scan's
+/// time, if the source has odometry.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScanRecord {
+    pub scan: RangeScan,
+    pub odometry: Option<Pose2>,
+}
+
+/// Why an input could not be read. Line numbers are 1-based.
+#[derive(Debug, Error)]
+pub enum InputError {
+    #[error("cannot open {}", path.display())]
+    Open {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("read failed at line {line}")]
+    Read {
+        line: usize,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("line {line}: {kind}")]
+    Malformed { line: usize, kind: MalformedLine },
+    #[error("line {line}: {error}")]
+    Odometry { line: usize, error: OdometryError },
+    #[error(transparent)]
+    Recording(#[from] ::lms200::recording::RecordingError),
+    #[error("recording byte {offset}: {error}")]
+    RecordingOdometry { offset: u64, error: OdometryError },
+}
+
+/// A stream of scans with odometry; implemented by every reader.
+pub trait LogSource: Iterator<Item = Result<ScanRecord, InputError>> {}
+
+impl<T: Iterator<Item = Result<ScanRecord, InputError>>> LogSource for T {}
+
+/// A log file being streamed, with how far the reading has got (for a
+/// progress bar).
+pub struct LogFile {
+    scans: Box<dyn LogSource>,
+    bytes_read: Rc<Cell<u64>>,
+    size: u64,
+}
+
+impl std::fmt::Debug for LogFile {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LogFile")
+            .field("bytes_read", &self.bytes_read.get())
+            .field("size", &self.size)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Counts the bytes that pass through a reader.
+struct CountingReader<R> {
+    inner: R,
+    count: Rc<Cell<u64>>,
+}
+
+impl<R: Read> Read for CountingReader<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.count.set(self.count.get() + n as u64);
+        Ok(n)
+    }
+}
+
+impl LogFile {
+    /// Opens a log for streaming. Only CARMEN text logs exist so far; the
+    /// telegram recording reader will be dispatched from here once its
+    /// format is fixed.
+    pub fn open(path: &Path) -> Result<LogFile, InputError> {
+        let open_error = |source| InputError::Open {
+            path: path.to_owned(),
+            source,
+        };
+        let file = File::open(path).map_err(open_error)?;
+        let size = file.metadata().map_err(open_error)?.len();
+        let bytes_read = Rc::new(Cell::new(0));
+        let reader = CountingReader {
+            inner: file,
+            count: Rc::clone(&bytes_read),
+        };
+        Ok(LogFile {
+            scans: Box::new(CarmenScans::new(BufReader::new(reader))),
+            bytes_read,
+            size,
+        })
+    }
+
+    /// Bytes consumed from the file so far (read ahead by the buffer).
+    pub fn bytes_read(&self) -> u64 {
+        self.bytes_read.get()
+    }
+
+    /// Size of the file (bytes).
+    pub fn size(&self) -> u64 {
+        self.size
+    }
+}
+
+impl Iterator for LogFile {
+    type Item = Result<ScanRecord, InputError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        self.scans.next()
+    }
+}
+
+/// Opens a log file for streaming; see [`LogFile::open`].
+pub fn open_log(path: &Path) -> Result<LogFile, InputError> {
+    LogFile::open(path)
+}

@@ -1,0 +1,12 @@
+//! Line correspondence and local localization against a line map.
+
+pub mod correspond;
+pub mod local;
+mod problem;
+mod solve;
+
+pub use correspond::{
+    CorrespondenceConfig, SegmentId, SegmentIndex, lines_correspond, match_score,
+};
+pub use local::{LocalizationResult, LocalizeError, LocalizerConfig, localize};
+pub use solve::LineConstraints;

@@ -1,0 +1,635 @@
+//! [`ClsMap`]: the global CLS map and its update (local CLS map → map
+//! frame → fusion of actual segments → region union).
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::{CogLine, Pose2, RangeScan};
+use crate::map::{SegmentMapConfig, blur_by_pose};
+
+use super::fusion::LineTable;
+use super::local::{LocalMapConfig, LocalMapError, LocalRegion, LocalSource, local_region};
+use super::loops::{
+    ClsLoop, ClsSegment, ClsShape, ClsmItem, InvariantError, SegmentMode, check_loops, items,
+};
+use super::region::{
+    EdgeOrigin, RegionConfig, RegionEdge, RegionError, RegionShape, clean_checked, union,
+};
+use super::shapes::{group_loops, to_shapes, whole_contours};
+use super::store::{StoreError, load_items, save_items};
+use super::window::Window;
+
+/// Tuning of the CLS map.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ClsMapConfig {
+    /// The local map of one scan (laser mounting, range limits).
+    pub local: LocalMapConfig,
+    /// Snapping and sliver limits of the union.
+    pub region: RegionConfig,
+    /// Fusion gates and σ floors, shared with the segment map.
+    pub fusion: SegmentMapConfig,
+    /// Clip long loops to a window around the scan so the union's cost
+    /// follows the neighbourhood, not the map. Default true; false unions
+    /// whole loops (the same region within the cleaning tolerances, for
+    /// comparison and as a reference in tests).
+    pub clip_to_window: bool,
+}
+
+impl Default for ClsMapConfig {
+    fn default() -> Self {
+        ClsMapConfig {
+            local: LocalMapConfig::default(),
+            region: RegionConfig::default(),
+            fusion: SegmentMapConfig::default(),
+            clip_to_window: true,
+        }
+    }
+}
+
+/// Why an update was refused; the map is left as it was.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ClsError {
+    #[error("the pose or its covariance is not finite")]
+    BadPose,
+    #[error("no local map from this scan: {0}")]
+    Local(#[from] LocalMapError),
+    #[error("region union failed: {0}")]
+    Region(#[from] RegionError),
+    #[error("an obstacle loop of the map lies in no shape after the union")]
+    LostHole,
+    #[error("the updated map would break an invariant: {0}")]
+    Invariant(#[from] InvariantError),
+}
+
+/// What one update did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub struct ClsUpdateStats {
+    /// Scan lines fused into a boundary line.
+    pub fused: usize,
+    /// Scan lines that became new boundary lines.
+    pub added: usize,
+    /// Shapes of the map the local region touched (the union's input).
+    pub touched_shapes: usize,
+    /// Segments (or pieces of segments clipped to the window around the
+    /// scan) of the map that went through the union.
+    pub touched_segments: usize,
+    /// Whether long loops were clipped to the window (the local path);
+    /// false when the whole touched loops were unioned.
+    pub clipped: bool,
+}
+
+/// The global Closed Line Segment map: pieces of explored free space, each
+/// an outer loop with obstacle loops inside, bounded by actual and virtual
+/// segments.
+#[derive(Debug, Clone, Default)]
+pub struct ClsMap {
+    config: ClsMapConfig,
+    shapes: Vec<ClsShape>,
+    /// Bounding box of each shape's outer loop, to find the touched ones.
+    bounds: Vec<([f64; 2], [f64; 2])>,
+}
+
+fn boxes_overlap(a: &([f64; 2], [f64; 2]), b: &([f64; 2], [f64; 2]), margin: f64) -> bool {
+    a.0[0] <= b.1[0] + margin
+        && b.0[0] <= a.1[0] + margin
+        && a.0[1] <= b.1[1] + margin
+        && b.0[1] <= a.1[1] + margin
+}
+
+impl ClsMap {
+    /// An empty map.
+    pub fn new(config: ClsMapConfig) -> Self {
+        ClsMap {
+            config,
+            shapes: Vec::new(),
+            bounds: Vec::new(),
+        }
+    }
+
+    /// A map made of `shapes`, refused unless it is a valid CLS map.
+    pub fn from_shapes(
+        config: ClsMapConfig,
+        shapes: Vec<ClsShape>,
+    ) -> Result<Self, InvariantError> {
+        check_loops(&shapes)?;
+        let bounds = shapes.iter().map(|s| s.outer.bounds()).collect();
+        Ok(ClsMap {
+            config,
+            shapes,
+            bounds,
+        })
+    }
+
+    pub fn config(&self) -> &ClsMapConfig {
+        &self.config
+    }
+
+    /// The pieces of explored free space.
+    pub fn shapes(&self) -> &[ClsShape] {
+        &self.shapes
+    }
+
+    /// All loops: each shape's outer loop followed by its holes.
+    pub fn loops(&self) -> impl Iterator<Item = &ClsLoop> + '_ {
+        self.shapes.iter().flat_map(ClsShape::loops)
+    }
+
+    /// Every boundary segment.
+    pub fn segments(&self) -> impl Iterator<Item = &ClsSegment> + '_ {
+        self.loops().flat_map(|l| l.segments().iter())
+    }
+
+    /// The walls seen so far.
+    pub fn actual_segments(&self) -> impl Iterator<Item = &ClsSegment> + '_ {
+        self.segments().filter(|s| s.mode == SegmentMode::Actual)
+    }
+
+    /// The exploration frontier: exactly the virtual segments.
+    pub fn virtual_segments(&self) -> impl Iterator<Item = &ClsSegment> + '_ {
+        self.segments().filter(|s| s.mode == SegmentMode::Virtual)
+    }
+
+    /// Number of boundary segments.
+    pub fn len(&self) -> usize {
+        self.loops().map(ClsLoop::len).sum()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.shapes.is_empty()
+    }
+
+    /// Area of explored free space (m²).
+    pub fn area(&self) -> f64 {
+        self.shapes.iter().map(ClsShape::area).sum()
+    }
+
+    /// Whether `p` (map frame) lies in explored free space.
+    pub fn contains(&self, p: [f64; 2]) -> bool {
+        self.shapes
+            .iter()
+            .zip(&self.bounds)
+            .any(|(s, b)| boxes_overlap(b, &(p, p), 0.0) && s.contains(p))
+    }
+
+    /// The paper's CLSM_Item list.
+    pub fn items(&self) -> Vec<ClsmItem> {
+        items(&self.shapes)
+    }
+
+    /// Checks the map's invariants (see [`super::loops`]).
+    pub fn check_invariants(&self) -> Result<(), InvariantError> {
+        check_loops(&self.shapes)
+    }
+
+    /// Writes the map to `path` as versioned `map.json`, atomically.
+    pub fn save(&self, path: &Path) -> Result<(), StoreError> {
+        save_items(path, &self.items())
+    }
+
+    /// Reads a map written by [`save`](Self::save); a corrupt, truncated or
+    /// invalid file is refused with the reason.
+    pub fn load(path: &Path, config: ClsMapConfig) -> Result<Self, StoreError> {
+        let shapes = load_items(path)?;
+        ClsMap::from_shapes(config, shapes).map_err(StoreError::Invariant)
+    }
+
+    /// Adds one scan: `lines` extracted from `scan` (robot frame, scan
+    /// order), taken at `pose` (robot in the map frame) with covariance
+    /// `pose_cov` (x, y, θ; m², m·rad, rad²). Only the shapes whose bounding
+    /// boxes touch the scan's region take part; the rest stay untouched.
+    pub fn update(
+        &mut self,
+        lines: &[CogLine],
+        scan: &RangeScan,
+        pose: Pose2,
+        pose_cov: [[f64; 3]; 3],
+    ) -> Result<ClsUpdateStats, ClsError> {
+        let finite = [pose.x, pose.y, pose.theta]
+            .iter()
+            .chain(pose_cov.iter().flatten())
+            .all(|v| v.is_finite());
+        if !finite {
+            return Err(ClsError::BadPose);
+        }
+        let local = local_region(lines, scan, &self.config.local)?.transformed(&pose);
+        self.add_region(&local, lines, pose, pose_cov)
+    }
+
+    /// The update after the local map is built: `local` is in the map
+    /// frame, its actual edges numbering `lines` (robot frame).
+    ///
+    /// Shapes whose bounding boxes miss a window around `local` are not
+    /// touched, nor are the holes of touched shapes that miss it. Loops
+    /// that cross the window are clipped to it and only the clipped part
+    /// goes through the union (module `window`), so the cost follows the
+    /// size of the neighbourhood, not of the map; if the clipping meets a
+    /// degenerate case the whole loops are unioned instead.
+    pub fn add_region(
+        &mut self,
+        local: &LocalRegion,
+        lines: &[CogLine],
+        pose: Pose2,
+        pose_cov: [[f64; 3]; 3],
+    ) -> Result<ClsUpdateStats, ClsError> {
+        let mut lb = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for e in &local.edges {
+            for p in [e.start, e.end] {
+                lb = (
+                    [lb.0[0].min(p[0]), lb.0[1].min(p[1])],
+                    [lb.1[0].max(p[0]), lb.1[1].max(p[1])],
+                );
+            }
+        }
+        let gates = self.config.fusion.fusion;
+        let margin = gates.max_centre_distance + gates.extent_tolerance + self.config.region.grid;
+        let window_box = (
+            [lb.0[0] - margin, lb.0[1] - margin],
+            [lb.1[0] + margin, lb.1[1] + margin],
+        );
+        let touched: Vec<usize> = (0..self.shapes.len())
+            .filter(|&i| boxes_overlap(&self.bounds[i], &window_box, 0.0))
+            .collect();
+        // Holes far from the scan cannot change: they stay out of the union
+        // and are handed back to whichever new shape encloses them.
+        let mut far_holes: Vec<ClsLoop> = Vec::new();
+        let mut near: Vec<&ClsLoop> = Vec::new();
+        for &i in &touched {
+            let shape = &self.shapes[i];
+            near.push(&shape.outer);
+            for h in &shape.holes {
+                if boxes_overlap(&h.bounds(), &window_box, 0.0) {
+                    near.push(h);
+                } else {
+                    far_holes.push(h.clone());
+                }
+            }
+        }
+        let inside = |l: &ClsLoop| {
+            let (lo, hi) = l.bounds();
+            lo[0] > window_box.0[0]
+                && lo[1] > window_box.0[1]
+                && hi[0] < window_box.1[0]
+                && hi[1] < window_box.1[1]
+        };
+        let (whole, crossing): (Vec<&ClsLoop>, Vec<&ClsLoop>) =
+            near.iter().partition(|l| inside(l));
+        let windowed = if crossing.is_empty() || !self.config.clip_to_window {
+            None
+        } else {
+            self.windowed_union(local, lines, pose, pose_cov, &whole, &crossing, window_box)?
+        };
+        let (mut new_shapes, mut stats) = match windowed {
+            Some(done) => done,
+            None => {
+                let mut table = LineTable::default();
+                let subject = whole_contours(&near, &mut table);
+                let mut stats = ClsUpdateStats::default();
+                let result = self.merge_local(
+                    subject, &mut table, local, lines, pose, pose_cov, &mut stats,
+                )?;
+                let shapes = to_shapes(&result, &table);
+                (shapes, stats)
+            }
+        };
+        stats.touched_shapes = touched.len();
+        for hole in far_holes {
+            let probe = hole.segments().first().map(|s| s.point_on_left(1e-6));
+            let owner = match new_shapes.len() {
+                1 => Some(0),
+                _ => probe.and_then(|p| new_shapes.iter().position(|s| s.outer.encloses(p))),
+            };
+            match owner.and_then(|k| new_shapes.get_mut(k)) {
+                Some(shape) => shape.holes.push(hole),
+                // Cannot happen for a valid map (the union only grows the
+                // free space around the hole); refuse rather than lose it.
+                None => return Err(ClsError::LostHole),
+            }
+        }
+        for &i in touched.iter().rev() {
+            self.shapes.swap_remove(i);
+            self.bounds.swap_remove(i);
+        }
+        for s in new_shapes {
+            self.bounds.push(s.outer.bounds());
+            self.shapes.push(s);
+        }
+        debug_assert_eq!(self.check_invariants(), Ok(()));
+        Ok(stats)
+    }
+
+    /// The union with the crossing loops clipped to the window; `None` if
+    /// the clipping or the splice meets a degenerate case.
+    #[allow(clippy::too_many_arguments)]
+    fn windowed_union(
+        &self,
+        local: &LocalRegion,
+        lines: &[CogLine],
+        pose: Pose2,
+        pose_cov: [[f64; 3]; 3],
+        whole: &[&ClsLoop],
+        crossing: &[&ClsLoop],
+        window_box: ([f64; 2], [f64; 2]),
+    ) -> Result<Option<(Vec<ClsShape>, ClsUpdateStats)>, ClsError> {
+        let mut table = LineTable::default();
+        let mut window = Window::around(
+            window_box.0,
+            window_box.1,
+            crossing,
+            self.config.region.grid,
+        )?;
+        let Some(clipped) = window.clip(crossing, &mut table) else {
+            return Ok(None);
+        };
+        let mut subject = whole_contours(whole, &mut table);
+        subject.extend(clipped);
+        let mut stats = ClsUpdateStats::default();
+        let result = self.merge_local(
+            subject, &mut table, local, lines, pose, pose_cov, &mut stats,
+        )?;
+        if !window.holds(&result) {
+            return Ok(None);
+        }
+        let Some(loops) = window.splice(
+            &result,
+            &table,
+            self.config.region.sliver_width,
+            &self.config.fusion.fusion,
+        ) else {
+            return Ok(None);
+        };
+        stats.clipped = true;
+        Ok(group_loops(loops).map(|shapes| (shapes, stats)))
+    }
+
+    /// Fusion and union: the scan's lines fused into the table's walls,
+    /// the boundaries settled onto the fused lines, the local region
+    /// unioned with `subject`, walls recovered and slivers cleaned.
+    #[allow(clippy::too_many_arguments)]
+    fn merge_local(
+        &self,
+        mut subject: Vec<Vec<RegionEdge>>,
+        table: &mut LineTable,
+        local: &LocalRegion,
+        lines: &[CogLine],
+        pose: Pose2,
+        pose_cov: [[f64; 3]; 3],
+        stats: &mut ClsUpdateStats,
+    ) -> Result<Vec<RegionShape>, ClsError> {
+        stats.touched_segments = subject.iter().map(Vec::len).sum();
+        let mut used: Vec<usize> = local
+            .edges
+            .iter()
+            .filter_map(|e| match e.source {
+                LocalSource::Actual(i) => Some(i),
+                LocalSource::Virtual => None,
+            })
+            .filter(|&i| i < lines.len())
+            .collect();
+        used.sort_unstable();
+        used.dedup();
+        let observed: Vec<CogLine> = used
+            .iter()
+            .map(|&i| blur_by_pose(&lines[i], &pose, &pose_cov))
+            .collect();
+        let (numbers, fused) = table.observe(&observed, &self.config.fusion);
+        stats.fused = fused;
+        stats.added = observed.len() - fused;
+        let mut clip: Vec<RegionEdge> = local
+            .edges
+            .iter()
+            .map(|e| RegionEdge {
+                start: e.start,
+                end: e.end,
+                origin: match e.source {
+                    LocalSource::Actual(i) => used
+                        .binary_search(&i)
+                        .ok()
+                        .and_then(|k| numbers.get(k))
+                        .map_or(EdgeOrigin::Virtual, |&n| EdgeOrigin::Actual(n)),
+                    LocalSource::Virtual => EdgeOrigin::Virtual,
+                },
+            })
+            .collect();
+        let max_shift = 2.0 * self.config.fusion.fusion.max_centre_distance;
+        table.settle(&mut clip, max_shift);
+        for contour in &mut subject {
+            table.settle(contour, max_shift);
+        }
+        let mut raw = union(
+            subject.iter().map(Vec::as_slice),
+            [clip.as_slice()],
+            &self.config.region,
+        )?;
+        for contour in raw.iter_mut().flatten() {
+            table.recover_walls(contour, self.config.region.sliver_width);
+        }
+        Ok(clean_checked(&raw, &self.config.region)?)
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::map::cls::local::{LocalEdge, point_segment_distance};
+
+    fn polygon(pts: &[[f64; 2]]) -> ClsLoop {
+        let n = pts.len();
+        ClsLoop::new(
+            (0..n)
+                .map(|i| ClsSegment::virtual_between(pts[i], pts[(i + 1) % n]))
+                .collect(),
+        )
+    }
+
+    fn square(x0: f64, y0: f64, x1: f64, y1: f64, clockwise: bool) -> ClsLoop {
+        let mut p = vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]];
+        if clockwise {
+            p.reverse();
+        }
+        polygon(&p)
+    }
+
+    fn local_square(x0: f64, y0: f64, x1: f64, y1: f64) -> LocalRegion {
+        let p = [[x0, y0], [x1, y0], [x1, y1], [x0, y1]];
+        LocalRegion {
+            edges: (0..4)
+                .map(|i| LocalEdge {
+                    start: p[i],
+                    end: p[(i + 1) % 4],
+                    source: LocalSource::Virtual,
+                })
+                .collect(),
+        }
+    }
+
+    /// A 40 m hall with ten pillars along it.
+    fn hall() -> ClsMap {
+        let holes = (0..10)
+            .map(|k| {
+                let x = 2.0 + 4.0 * k as f64;
+                square(x, 2.0, x + 0.5, 2.5, true)
+            })
+            .collect();
+        let shape = ClsShape {
+            outer: square(0.0, 0.0, 42.0, 5.0, false),
+            holes,
+        };
+        ClsMap::from_shapes(ClsMapConfig::default(), vec![shape]).unwrap()
+    }
+
+    #[test]
+    fn far_obstacle_loops_stay_out_of_the_union_and_in_the_map() {
+        let mut map = hall();
+        let area = map.area();
+        // Grow the hall's end; only the last pillar is near.
+        let stats = map
+            .add_region(
+                &local_square(38.8, 1.0, 44.0, 4.0),
+                &[],
+                Pose2::IDENTITY,
+                [[0.0; 3]; 3],
+            )
+            .unwrap();
+        assert_eq!(stats.touched_shapes, 1);
+        assert_eq!(
+            stats.touched_segments,
+            4 + 4,
+            "the outer loop and the nearest pillar"
+        );
+        map.check_invariants().unwrap();
+        assert_eq!(map.shapes()[0].holes.len(), 10);
+        assert!(
+            (map.area() - (area + 2.0 * 3.0)).abs() < 1e-6,
+            "{}",
+            map.area()
+        );
+        assert!(!map.contains([2.25, 2.25]) && map.contains([43.0, 2.0]));
+    }
+
+    #[test]
+    fn a_bulge_through_a_long_wall_is_clipped_and_spliced() {
+        let mut map = hall();
+        let before = map.area();
+        let stats = map
+            .add_region(
+                &local_square(10.0, -1.0, 12.0, 1.0),
+                &[],
+                Pose2::IDENTITY,
+                [[0.0; 3]; 3],
+            )
+            .unwrap();
+        assert!(stats.clipped);
+        // Only the pieces near the window went through the union.
+        assert!(stats.touched_segments < 12, "{stats:?}");
+        map.check_invariants().unwrap();
+        assert!((map.area() - before - 2.0).abs() < 1e-9, "{}", map.area());
+        assert!(map.contains([11.0, -0.5]));
+        // The hall's far walls are untouched: still one segment each.
+        let outer = map.shapes()[0].outer.segments();
+        assert!(
+            outer
+                .iter()
+                .any(|s| s.start() == [42.0, 0.0] && s.end() == [42.0, 5.0])
+        );
+        assert!(
+            outer
+                .iter()
+                .any(|s| s.start() == [42.0, 5.0] && s.end() == [0.0, 5.0])
+        );
+        // The bottom wall is cut only where the bulge meets it.
+        assert_eq!(outer.len(), 4 + 4, "{outer:?}");
+    }
+
+    #[test]
+    fn separate_regions_are_not_touched() {
+        let mut map = hall();
+        let stats = map
+            .add_region(
+                &local_square(100.0, 0.0, 102.0, 2.0),
+                &[],
+                Pose2::IDENTITY,
+                [[0.0; 3]; 3],
+            )
+            .unwrap();
+        assert_eq!((stats.touched_shapes, stats.touched_segments), (0, 0));
+        assert_eq!(map.shapes().len(), 2);
+        // Bridging the two merges them into one shape.
+        map.add_region(
+            &local_square(41.0, 0.5, 101.0, 1.5),
+            &[],
+            Pose2::IDENTITY,
+            [[0.0; 3]; 3],
+        )
+        .unwrap();
+        assert_eq!(map.shapes().len(), 1);
+        assert_eq!(map.shapes()[0].holes.len(), 10);
+        map.check_invariants().unwrap();
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(48))]
+        /// The clipped union gives the same region as the whole one.
+        #[test]
+        fn clipping_to_the_window_changes_nothing(
+            regions in proptest::collection::vec((-2.0..44.0f64, -1.0..6.0f64, 0.2..4.0f64, 0.2..3.0f64), 1..6),
+        ) {
+            let mut clipped = hall();
+            let mut whole = hall();
+            whole.config.clip_to_window = false;
+            for (x, y, w, h) in regions {
+                let local = local_square(x, y, x + w, y + h);
+                let a = clipped.add_region(&local, &[], Pose2::IDENTITY, [[0.0; 3]; 3]);
+                let b = whole.add_region(&local, &[], Pose2::IDENTITY, [[0.0; 3]; 3]);
+                proptest::prop_assert_eq!(a.is_ok(), b.is_ok());
+                proptest::prop_assert_eq!(clipped.check_invariants(), Ok(()));
+                // Same region, up to the cleaning's vertex moves (a few mm):
+                // membership agrees away from both boundaries.
+                for i in 0..120 {
+                    for j in 0..24 {
+                        let p = [-2.5 + 0.4 * f64::from(i) + 0.013, -1.5 + 0.4 * f64::from(j) + 0.007];
+                        let clear = |m: &ClsMap| {
+                            m.segments().all(|s| point_segment_distance(p, s.start(), s.end()) > 0.01)
+                        };
+                        if clear(&clipped) && clear(&whole) {
+                            proptest::prop_assert_eq!(clipped.contains(p), whole.contains(p), "at {:?}", p);
+                        }
+                    }
+                }
+                proptest::prop_assert!((clipped.area() - whole.area()).abs() < 0.1, "{} vs {}", clipped.area(), whole.area());
+                proptest::prop_assert_eq!(clipped.shapes().len(), whole.shapes().len());
+                let holes = |m: &ClsMap| m.shapes().iter().map(|s| s.holes.len()).sum::<usize>();
+                proptest::prop_assert_eq!(holes(&clipped), holes(&whole));
+            }
+        }
+    }
+
+    #[test]
+    fn a_bad_update_leaves_the_map_as_it_was() {
+        let mut map = hall();
+        let before = map.items();
+        let scan = RangeScan {
+            t: 0.0,
+            angle_min: -1.0,
+            angle_increment: 0.01,
+            ranges: vec![Ok(1.0); 100],
+        };
+        let nan_pose = Pose2 {
+            x: f64::NAN,
+            y: 0.0,
+            theta: 0.0,
+        };
+        assert_eq!(
+            map.update(&[], &scan, nan_pose, [[0.0; 3]; 3]),
+            Err(ClsError::BadPose)
+        );
+        let far = local_square(0.0, 0.0, 2e5, 1.0);
+        assert!(matches!(
+            map.add_region(&far, &[], Pose2::IDENTITY, [[0.0; 3]; 3]),
+            Err(ClsError::Region(RegionError::Coordinate(_)))
+        ));
+        assert_eq!(map.items(), before);
+    }
+}

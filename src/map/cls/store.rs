@@ -1,0 +1,453 @@
+//! The CLS map on disk: versioned `map.json` mirroring the CLSM_Item list.
+//!
+//! ```json
+//! {"format":"clsmap-cls","version":1,"frame":"map","created_by":"clsmap 0.1.0",
+//!  "checksum":123456789,
+//!  "segments":[{"index":0,"next":1,"mode":"actual","theta":0.0,"sigma_theta":0.002,
+//!               "xc":1.0,"yc":0.0,"sigma_c":0.005,"start":[0.0,0.0],"end":[2.0,0.0]}, ...]}
+//! ```
+//!
+//! Metres, radians, map frame. `checksum` is the CRC-32 (ISO-HDLC, as zip
+//! and PNG) of the bytes of the `segments` array exactly as stored (written
+//! as compact JSON, the last member of the file). The stored bytes are
+//! checked rather than a re-serialisation of the parsed numbers, because
+//! serde_json's default float parser may differ from the writer by one
+//! unit in the last place, which would change the re-serialised text.
+//! Files are written atomically: a temporary file in the same directory,
+//! fsync, rename, fsync of the directory, so a crash leaves either the old
+//! map or the new one.
+
+use std::fs::{self, File};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use crc::{CRC_32_ISO_HDLC, Crc};
+use serde::{Deserialize, Serialize};
+
+use super::loops::{ClsLoop, ClsSegment, ClsShape, ClsmItem, InvariantError, SegmentMode};
+use crate::geometry::CogLine;
+
+/// The file's `format` tag.
+pub const FORMAT: &str = "clsmap-cls";
+/// The only version this build reads and writes.
+pub const VERSION: u32 = 1;
+
+const CRC32: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
+
+/// One CLSM_Item as stored.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SegmentRecord {
+    pub index: usize,
+    pub next: usize,
+    pub mode: SegmentMode,
+    pub theta: f64,
+    pub sigma_theta: f64,
+    pub xc: f64,
+    pub yc: f64,
+    pub sigma_c: f64,
+    pub start: [f64; 2],
+    pub end: [f64; 2],
+}
+
+/// The whole file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MapFile {
+    pub format: String,
+    pub version: u32,
+    /// Frame of every coordinate; always "map".
+    pub frame: String,
+    /// Program and version that wrote the file.
+    pub created_by: String,
+    /// CRC-32 of the compact JSON of `segments`.
+    pub checksum: u32,
+    pub segments: Vec<SegmentRecord>,
+}
+
+/// Why a map could not be stored or loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("the map file is truncated: {0}")]
+    Truncated(serde_json::Error),
+    #[error("the map file is not valid map JSON: {0}")]
+    Parse(serde_json::Error),
+    #[error("not a CLS map file (format {0:?})")]
+    Format(String),
+    #[error("map file version {found} is not supported (this build reads {VERSION})")]
+    Version { found: u32 },
+    #[error("checksum mismatch: the file says {stored:#010x}, its segments give {computed:#010x}")]
+    Checksum { stored: u32, computed: u32 },
+    #[error("segment {0} has a non-finite number")]
+    NotFinite(usize),
+    #[error(
+        "segment at position {position} has index {index} or next {next} out of order or range"
+    )]
+    BadIndex {
+        position: usize,
+        index: usize,
+        next: usize,
+    },
+    #[error("the next links starting at segment {0} do not form a closed loop")]
+    BrokenLoop(usize),
+    #[error("the stored map is not a valid CLS map: {0}")]
+    Invariant(InvariantError),
+}
+
+fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> StoreError + '_ {
+    move |source| StoreError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+fn record(item: &ClsmItem) -> SegmentRecord {
+    SegmentRecord {
+        index: item.index,
+        next: item.next,
+        mode: item.mode,
+        theta: item.line.theta,
+        sigma_theta: item.line.sigma_theta,
+        xc: item.line.xc,
+        yc: item.line.yc,
+        sigma_c: item.line.sigma_c,
+        start: item.line.start,
+        end: item.line.end,
+    }
+}
+
+/// The metadata members of the file; the segments follow as raw JSON.
+#[derive(Serialize)]
+struct Header<'a> {
+    format: &'a str,
+    version: u32,
+    frame: &'a str,
+    created_by: &'a str,
+    checksum: u32,
+}
+
+/// The file contents for `items`.
+pub fn encode(items: &[ClsmItem]) -> Result<String, serde_json::Error> {
+    let segments: Vec<SegmentRecord> = items.iter().map(record).collect();
+    let array = serde_json::to_string(&segments)?;
+    let header = serde_json::to_string(&Header {
+        format: FORMAT,
+        version: VERSION,
+        frame: "map",
+        created_by: concat!("clsmap ", env!("CARGO_PKG_VERSION")),
+        checksum: CRC32.checksum(array.as_bytes()),
+    })?;
+    // `header` is a JSON object: open it up and append the segments last.
+    let open = header.strip_suffix('}').unwrap_or(&header);
+    Ok(format!("{open},\n\"segments\":{array}}}\n"))
+}
+
+/// The raw text of member `key` of the top-level object in `text`, or
+/// `None` if there is no such member (or the text is not an object).
+fn raw_member<'a>(text: &'a str, key: &str) -> Option<&'a str> {
+    let bytes = text.as_bytes();
+    let mut depth = 0usize;
+    let mut i = 0;
+    let mut value_start: Option<usize> = None;
+    let mut value_depth = 0;
+    while i < bytes.len() {
+        match bytes[i] {
+            b'"' => {
+                let start = i + 1;
+                i += 1;
+                while i < bytes.len() && bytes[i] != b'"' {
+                    i += if bytes[i] == b'\\' { 2 } else { 1 };
+                }
+                let string = text.get(start..i.min(text.len()))?;
+                if depth == 1 && value_start.is_none() && string == key {
+                    // A key at the top level is followed by ':'.
+                    let rest = text.get(i + 1..)?;
+                    let colon = rest.find(|c: char| !c.is_whitespace())?;
+                    if rest[colon..].starts_with(':') {
+                        let after = i + 1 + colon + 1;
+                        let skip = text.get(after..)?.find(|c: char| !c.is_whitespace())?;
+                        value_start = Some(after + skip);
+                        value_depth = depth;
+                        i = after + skip;
+                        continue;
+                    }
+                }
+            }
+            b'{' | b'[' => depth += 1,
+            b'}' | b']' => {
+                depth = depth.checked_sub(1)?;
+                if let Some(start) = value_start.filter(|_| depth == value_depth) {
+                    return text.get(start..=i);
+                }
+            }
+            _ => {}
+        }
+        i += 1;
+    }
+    None
+}
+
+/// Writes `items` to `path` atomically.
+pub fn save_items(path: &Path, items: &[ClsmItem]) -> Result<(), StoreError> {
+    let text = encode(items).map_err(StoreError::Parse)?;
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let name = path
+        .file_name()
+        .map_or_else(|| "map.json".into(), |n| n.to_string_lossy().into_owned());
+    let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
+    let write = || -> std::io::Result<()> {
+        let mut f = File::create(&tmp)?;
+        f.write_all(text.as_bytes())?;
+        f.sync_all()
+    };
+    if let Err(e) = write() {
+        // Best effort: the temporary file is useless now.
+        let _ = fs::remove_file(&tmp);
+        return Err(io_error(&tmp)(e));
+    }
+    fs::rename(&tmp, path).map_err(io_error(path))?;
+    // The rename is durable only once the directory entry is on disk.
+    File::open(&dir)
+        .and_then(|d| d.sync_all())
+        .map_err(io_error(&dir))
+}
+
+/// Reads and validates a map file; returns its shapes (not yet checked
+/// against the loop invariants, which the caller does).
+pub fn load_items(path: &Path) -> Result<Vec<ClsShape>, StoreError> {
+    let text = fs::read_to_string(path).map_err(io_error(path))?;
+    decode(&text)
+}
+
+/// Parses and validates the contents of a map file.
+pub fn decode(text: &str) -> Result<Vec<ClsShape>, StoreError> {
+    let file: MapFile = serde_json::from_str(text).map_err(|e| {
+        if e.is_eof() {
+            StoreError::Truncated(e)
+        } else {
+            StoreError::Parse(e)
+        }
+    })?;
+    if file.format != FORMAT {
+        return Err(StoreError::Format(file.format));
+    }
+    if file.version != VERSION {
+        return Err(StoreError::Version {
+            found: file.version,
+        });
+    }
+    let raw = raw_member(text, "segments").unwrap_or("");
+    let computed = CRC32.checksum(raw.as_bytes());
+    if computed != file.checksum {
+        return Err(StoreError::Checksum {
+            stored: file.checksum,
+            computed,
+        });
+    }
+    let n = file.segments.len();
+    for (position, s) in file.segments.iter().enumerate() {
+        let numbers = [
+            s.theta,
+            s.sigma_theta,
+            s.xc,
+            s.yc,
+            s.sigma_c,
+            s.start[0],
+            s.start[1],
+            s.end[0],
+            s.end[1],
+        ];
+        if !numbers.iter().all(|v| v.is_finite()) {
+            return Err(StoreError::NotFinite(position));
+        }
+        if s.index != position || s.next >= n {
+            return Err(StoreError::BadIndex {
+                position,
+                index: s.index,
+                next: s.next,
+            });
+        }
+    }
+    shapes_from_records(&file.segments)
+}
+
+/// Follows the `next` links into loops, then groups holes (clockwise)
+/// with the outer loop (counter-clockwise) that encloses them.
+fn shapes_from_records(records: &[SegmentRecord]) -> Result<Vec<ClsShape>, StoreError> {
+    let n = records.len();
+    let mut seen = vec![false; n];
+    let mut loops = Vec::new();
+    for first in 0..n {
+        if seen[first] {
+            continue;
+        }
+        let mut segments = Vec::new();
+        let mut k = first;
+        loop {
+            if seen[k] {
+                return Err(StoreError::BrokenLoop(first));
+            }
+            seen[k] = true;
+            let r = &records[k];
+            let line = CogLine {
+                theta: r.theta,
+                xc: r.xc,
+                yc: r.yc,
+                sigma_theta: r.sigma_theta,
+                sigma_c: r.sigma_c,
+                start: r.start,
+                end: r.end,
+                n_points: 0,
+            };
+            segments.push(ClsSegment { line, mode: r.mode });
+            k = r.next;
+            if k == first {
+                break;
+            }
+        }
+        loops.push(ClsLoop::new(segments));
+    }
+    let (outers, holes): (Vec<ClsLoop>, Vec<ClsLoop>) =
+        loops.into_iter().partition(|l| l.signed_area() > 0.0);
+    let mut shapes: Vec<ClsShape> = outers
+        .into_iter()
+        .map(|outer| ClsShape {
+            outer,
+            holes: vec![],
+        })
+        .collect();
+    for hole in holes {
+        let probe = hole.segments().first().map(|s| s.point_on_left(1e-6));
+        // The smallest outer loop around the hole is its shape.
+        let owner = probe.and_then(|p| {
+            shapes
+                .iter_mut()
+                .filter(|s| s.outer.encloses(p))
+                .min_by(|a, b| a.outer.signed_area().total_cmp(&b.outer.signed_area()))
+        });
+        match owner {
+            Some(shape) => shape.holes.push(hole),
+            None => {
+                return Err(StoreError::Invariant(InvariantError::Orientation {
+                    loop_index: 0,
+                    signed_area: hole.signed_area(),
+                    expected: "a clockwise loop must lie inside a counter-clockwise one",
+                }));
+            }
+        }
+    }
+    Ok(shapes)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::map::cls::loops::items;
+
+    fn square_shape() -> Vec<ClsShape> {
+        let pts = [[0.0, 0.0], [3.0, 0.0], [3.0, 2.0], [0.0, 2.0]];
+        let outer = ClsLoop::new(
+            (0..4)
+                .map(|i| ClsSegment::virtual_between(pts[i], pts[(i + 1) % 4]))
+                .collect(),
+        );
+        let hole_pts = [[1.0, 0.5], [1.0, 1.5], [2.0, 1.5], [2.0, 0.5]];
+        let hole = ClsLoop::new(
+            (0..4)
+                .map(|i| {
+                    let mut s = ClsSegment::virtual_between(hole_pts[i], hole_pts[(i + 1) % 4]);
+                    s.mode = SegmentMode::Actual;
+                    s.line.sigma_c = 0.01;
+                    s
+                })
+                .collect(),
+        );
+        vec![ClsShape {
+            outer,
+            holes: vec![hole],
+        }]
+    }
+
+    #[test]
+    fn round_trips_and_regroups_holes() {
+        let shapes = square_shape();
+        let text = encode(&items(&shapes)).unwrap();
+        let back = decode(&text).unwrap();
+        assert_eq!(back.len(), 1);
+        assert_eq!(back[0].holes.len(), 1);
+        assert_eq!(items(&back).len(), 8);
+        for (a, b) in items(&back).iter().zip(items(&shapes)) {
+            assert_eq!(a.line.start, b.line.start);
+            assert_eq!(a.mode, b.mode);
+            assert_eq!(a.line.sigma_c, b.line.sigma_c);
+        }
+    }
+
+    #[test]
+    fn corrupt_files_are_refused_with_the_reason() {
+        let text = encode(&items(&square_shape())).unwrap();
+        assert!(matches!(
+            decode(&text[..text.len() / 2]),
+            Err(StoreError::Truncated(_))
+        ));
+        let flipped = text.replacen("3.0", "3.5", 1);
+        assert!(matches!(decode(&flipped), Err(StoreError::Checksum { .. })));
+        let v2 = text.replacen("\"version\":1", "\"version\":2", 1);
+        assert!(matches!(decode(&v2), Err(StoreError::Version { found: 2 })));
+        assert!(matches!(decode("{\"x\": 1}"), Err(StoreError::Parse(_))));
+        // Bad links behind a valid checksum.
+        let relink = |position: usize, next: usize| {
+            let mut items_back: Vec<ClsmItem> = items(&square_shape());
+            items_back[position].next = next;
+            encode(&items_back).unwrap()
+        };
+        assert!(matches!(
+            decode(&relink(3, 99)),
+            Err(StoreError::BadIndex { position: 3, .. })
+        ));
+        assert!(matches!(
+            decode(&relink(3, 1)),
+            Err(StoreError::BrokenLoop(0))
+        ));
+        let nan = text.replacen("\"theta\":", "\"theta\":1e999,\"x\":", 1);
+        assert!(decode(&nan).is_err());
+    }
+
+    #[test]
+    fn the_segments_member_is_found_at_the_top_level_only() {
+        let text =
+            r#"{"a":"\"segments\":[1]","b":{"segments":[2]},"segments" : [ [3], {"x":"]"} ] }"#;
+        assert_eq!(raw_member(text, "segments"), Some(r#"[ [3], {"x":"]"} ]"#));
+        assert_eq!(raw_member("[1]", "segments"), None);
+        assert_eq!(raw_member(r#"{"segments":[1"#, "segments"), None);
+    }
+
+    #[test]
+    fn saving_is_atomic_and_leaves_no_temporary_file() {
+        let dir = std::env::temp_dir().join(format!("clsmap-store-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("map.json");
+        save_items(&path, &items(&square_shape())).unwrap();
+        save_items(&path, &items(&square_shape())).unwrap();
+        let names: Vec<_> = fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names.len(), 1, "{names:?}");
+        assert_eq!(load_items(&path).unwrap().len(), 1);
+        assert!(matches!(
+            load_items(&dir.join("missing.json")),
+            Err(StoreError::Io { .. })
+        ));
+        fs::remove_dir_all(&dir).unwrap();
+    }
+}

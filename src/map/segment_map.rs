@@ -1,0 +1,538 @@
+//! The incremental map of actual (observed) line segments, in the map
+//! frame, with the paper's fusion of corresponding segments.
+//!
+//! API (for the pipeline and the CLS map; keep up to date):
+//! - `SegmentMapConfig` (serde): fusion gates, bridging gap, σ floors.
+//! - `SegmentMap::new(cfg)`, `update(local_lines, pose, pose_cov) ->
+//!   UpdateStats`, `index() -> &SegmentIndex`, `len()`, `segments()`,
+//!   `observations(id)`, `snapshot() -> SegmentMapFile` (the JSON form).
+//! - `blur_by_pose(line_robot, pose, cov) -> CogLine` (map frame) and
+//!   `fuse(a, b) -> Option<CogLine>`: the two steps of an update, public
+//!   so the CLS map can fuse the same way.
+//!
+//! # Fusion
+//!
+//! A scan's line, moved into the map frame with the corrected pose, is
+//! "blurred" by the pose covariance: its σθ and σc grow by what the pose
+//! uncertainty does to a line at that place. Two corresponding lines are
+//! then fused as two independent measurements of the same infinite line:
+//! the direction is the weighted circular mean (weights 1/σθ²), the offset
+//! is the weighted mean of each line's offset at a common reference point
+//! (weights 1/(σc² + s²σθ²), `s` the distance of the reference from that
+//! line's centre), and the end points of both are projected onto the fused
+//! line with the extremes kept. Map lines are floored at a minimum σ so
+//! that many correlated observations (the same walls seen from poses that
+//! were themselves derived from this map) do not make the map rigid beyond
+//! what those observations justify.
+
+use crate::geometry::{CogLine, Pose2, wrap_angle};
+use crate::localize::{CorrespondenceConfig, SegmentId, SegmentIndex, match_score};
+use serde::{Deserialize, Serialize};
+
+/// Tuning of the map update; SI units.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SegmentMapConfig {
+    /// When a scan's line (map frame) is the same wall as a map line.
+    /// Defaults: 5°, 0.10 m across, 0.3 m beyond the ends — the paper's
+    /// test with gates a little tighter across than localization's, since
+    /// the pose is already corrected when the map is updated.
+    pub fusion: CorrespondenceConfig,
+    /// A fused line absorbs another corresponding map line only if their
+    /// extents overlap or leave a gap no larger than this (m), so a scan
+    /// line bridging two pieces of one wall joins them but a doorway is
+    /// not closed over. Default 0.1.
+    pub merge_gap: f64,
+    /// Floor on a fused map line's σc (m). Default 0.005.
+    pub min_sigma_c: f64,
+    /// Floor on a fused map line's σθ (rad). Default 0.002.
+    pub min_sigma_theta: f64,
+}
+
+impl Default for SegmentMapConfig {
+    fn default() -> Self {
+        SegmentMapConfig {
+            fusion: CorrespondenceConfig {
+                max_angle_diff: 0.087,
+                max_centre_distance: 0.10,
+                extent_tolerance: 0.3,
+            },
+            merge_gap: 0.1,
+            min_sigma_c: 0.005,
+            min_sigma_theta: 0.002,
+        }
+    }
+}
+
+/// What one update did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub struct UpdateStats {
+    /// Scan lines fused into an existing map line.
+    pub fused: usize,
+    /// Scan lines added as new map lines.
+    pub added: usize,
+    /// Map lines absorbed into another one (bridged by a scan line).
+    pub merged: usize,
+}
+
+/// The map's JSON form (`segments.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SegmentMapFile {
+    /// Always [`SegmentMapFile::FORMAT`].
+    pub format: String,
+    pub version: u32,
+    pub segments: Vec<MapSegment>,
+}
+
+impl SegmentMapFile {
+    pub const FORMAT: &'static str = "clsmap-actual-segments";
+    pub const VERSION: u32 = 1;
+}
+
+/// One map segment in the JSON form.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MapSegment {
+    pub id: SegmentId,
+    /// Keyframe scans that contributed to this segment.
+    pub observations: u32,
+    pub line: CogLine,
+}
+
+/// The growing map of actual segments.
+#[derive(Debug, Clone, Default)]
+pub struct SegmentMap {
+    config: SegmentMapConfig,
+    index: SegmentIndex,
+    /// Keyframes that contributed, per id (`SegmentId.0`); 0 once removed.
+    observations: Vec<u32>,
+}
+
+/// `(θ, offset)` variances a line gains from the pose covariance `cov`
+/// (x, y, θ) when it is moved into the map frame by `pose`: first-order
+/// propagation through the line's normal offset at its centre.
+fn pose_blur(line_map: &CogLine, pose: &Pose2, cov: &[[f64; 3]; 3]) -> (f64, f64) {
+    let n = line_map.normal();
+    let arm = [line_map.xc - pose.x, line_map.yc - pose.y];
+    // d(offset)/d(x, y, θ): the centre moves by δt + J·arm·δθ.
+    let j = [n[0], n[1], -n[0] * arm[1] + n[1] * arm[0]];
+    let mut var_c = 0.0;
+    for (a, ja) in j.iter().enumerate() {
+        for (b, jb) in j.iter().enumerate() {
+            var_c += ja * cov[a][b] * jb;
+        }
+    }
+    (cov[2][2].max(0.0), var_c.max(0.0))
+}
+
+/// A robot-frame line moved into the map frame by `pose`, its σθ and σc
+/// grown by the pose covariance `cov` (x, y, θ; m², m·rad, rad²).
+pub fn blur_by_pose(line_robot: &CogLine, pose: &Pose2, cov: &[[f64; 3]; 3]) -> CogLine {
+    let mut line = line_robot.transformed(pose);
+    let (var_t, var_c) = pose_blur(&line, pose, cov);
+    line.sigma_theta = (line.sigma_theta.powi(2) + var_t).sqrt();
+    line.sigma_c = (line.sigma_c.powi(2) + var_c).sqrt();
+    line
+}
+
+/// Fuses two lines measured as the same wall (same direction sense) into
+/// one; see the module documentation. `None` if the directions cancel or a
+/// value is not finite.
+pub fn fuse(a: &CogLine, b: &CogLine) -> Option<CogLine> {
+    // Tiny floors keep the weights finite for noise-free (synthetic) lines.
+    let var_t = |l: &CogLine| l.sigma_theta.powi(2).max(1e-18);
+    let var_c = |l: &CogLine| l.sigma_c.powi(2).max(1e-18);
+    let (wa, wb) = (1.0 / var_t(a), 1.0 / var_t(b));
+    let sx = wa * a.theta.cos() + wb * b.theta.cos();
+    let sy = wa * a.theta.sin() + wb * b.theta.sin();
+    if sx.hypot(sy) <= 1e-9 * (wa + wb) {
+        return None;
+    }
+    let theta = sy.atan2(sx);
+
+    // Reference point: the centres weighted by their offset certainty.
+    let (ca, cb) = (1.0 / var_c(a), 1.0 / var_c(b));
+    let r = [
+        (ca * a.xc + cb * b.xc) / (ca + cb),
+        (ca * a.yc + cb * b.yc) / (ca + cb),
+    ];
+    // Each line's signed distance from r and its variance there.
+    let offset = |l: &CogLine| {
+        let s = l.along(r);
+        (l.signed_distance(r), var_c(l) + s * s * var_t(l))
+    };
+    let (da, va) = offset(a);
+    let (db, vb) = offset(b);
+    let var_off = 1.0 / (1.0 / va + 1.0 / vb);
+    let d = var_off * (da / va + db / vb);
+    let (sn, cs) = theta.sin_cos();
+    let normal = [-sn, cs];
+    let centre = [r[0] - d * normal[0], r[1] - d * normal[1]];
+
+    let along = |p: [f64; 2]| cs * (p[0] - centre[0]) + sn * (p[1] - centre[1]);
+    let ends = [a.start, a.end, b.start, b.end].map(along);
+    let s_min = ends.iter().copied().fold(f64::INFINITY, f64::min);
+    let s_max = ends.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let fused = CogLine::from_centre(
+        theta,
+        centre,
+        s_min,
+        s_max,
+        (1.0 / (wa + wb)).sqrt(),
+        var_off.sqrt(),
+        a.n_points.saturating_add(b.n_points),
+    );
+    let finite = [
+        fused.theta,
+        fused.xc,
+        fused.yc,
+        fused.sigma_c,
+        fused.sigma_theta,
+    ]
+    .iter()
+    .chain(fused.start.iter())
+    .chain(fused.end.iter())
+    .all(|v| v.is_finite());
+    finite.then_some(fused)
+}
+
+/// Gap along `a` between `a`'s extent and `b`'s projected extent (m);
+/// 0 when they overlap.
+fn gap_along(a: &CogLine, b: &CogLine) -> f64 {
+    let (a0, a1) = a.extent();
+    let (b0, b1) = (a.along(b.start), a.along(b.end));
+    let (alo, ahi) = (a0.min(a1), a0.max(a1));
+    let (blo, bhi) = (b0.min(b1), b0.max(b1));
+    (blo - ahi).max(alo - bhi).max(0.0)
+}
+
+/// Whether `a` and `b` lie on one line within the gates: directions close
+/// and each centre close to the other's infinite line. Unlike the
+/// correspondence test this ignores the extents, which [`gap_along`] checks.
+fn collinear(a: &CogLine, b: &CogLine, gates: &CorrespondenceConfig) -> bool {
+    wrap_angle(a.theta - b.theta).abs() <= gates.max_angle_diff
+        && a.distance_to_point(b.centre()) <= gates.max_centre_distance
+        && b.distance_to_point(a.centre()) <= gates.max_centre_distance
+}
+
+impl SegmentMap {
+    pub fn new(config: SegmentMapConfig) -> Self {
+        SegmentMap {
+            config,
+            index: SegmentIndex::new(),
+            observations: Vec::new(),
+        }
+    }
+
+    pub fn config(&self) -> &SegmentMapConfig {
+        &self.config
+    }
+
+    /// The map lines, for localization.
+    pub fn index(&self) -> &SegmentIndex {
+        &self.index
+    }
+
+    pub fn len(&self) -> usize {
+        self.index.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.index.is_empty()
+    }
+
+    /// Keyframes that contributed to segment `id` (0 if there is none).
+    pub fn observations(&self, id: SegmentId) -> u32 {
+        self.observations.get(id.0 as usize).copied().unwrap_or(0)
+    }
+
+    fn set_observations(&mut self, id: SegmentId, count: u32) {
+        let i = id.0 as usize;
+        if self.observations.len() <= i {
+            self.observations.resize(i + 1, 0);
+        }
+        self.observations[i] = count;
+    }
+
+    /// All segments in id order.
+    pub fn segments(&self) -> impl Iterator<Item = MapSegment> + '_ {
+        self.index.iter().map(|(id, line)| MapSegment {
+            id,
+            observations: self.observations(id),
+            line: *line,
+        })
+    }
+
+    /// The map in its JSON form.
+    pub fn snapshot(&self) -> SegmentMapFile {
+        SegmentMapFile {
+            format: SegmentMapFile::FORMAT.to_owned(),
+            version: SegmentMapFile::VERSION,
+            segments: self.segments().collect(),
+        }
+    }
+
+    fn floor_sigmas(&self, mut line: CogLine) -> CogLine {
+        line.sigma_c = line.sigma_c.max(self.config.min_sigma_c);
+        line.sigma_theta = line.sigma_theta.max(self.config.min_sigma_theta);
+        line
+    }
+
+    /// Adds one keyframe: `local_lines` in the robot frame, `pose` the
+    /// corrected robot pose (map frame) with covariance `pose_cov` (x, y,
+    /// θ). Each scan line is fused into its best corresponding map line
+    /// (several scan lines may fuse into one map line); a fused line then
+    /// absorbs any other collinear map line it now overlaps (a scan line
+    /// bridging two pieces of a wall); the rest are added. Scan lines are
+    /// matched only against lines that existed before this scan, so two
+    /// pieces of one scan are never joined across the gap the extractor
+    /// saw between them.
+    pub fn update(
+        &mut self,
+        local_lines: &[CogLine],
+        pose: &Pose2,
+        pose_cov: &[[f64; 3]; 3],
+    ) -> UpdateStats {
+        let mut stats = UpdateStats::default();
+        let mut new_lines = Vec::new();
+        let gates = self.config.fusion;
+        let mut candidates: Vec<(SegmentId, f64)> = Vec::new();
+        for local in local_lines {
+            let observed = blur_by_pose(local, pose, pose_cov);
+            candidates.clear();
+            candidates.extend(self.index.candidates(&observed, &gates).filter_map(|id| {
+                let line = self.index.get(id)?;
+                Some((id, match_score(&observed, line, &gates)))
+            }));
+            candidates.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+            let fused = candidates
+                .first()
+                .and_then(|&(target, _)| Some((target, fuse(self.index.get(target)?, &observed)?)));
+            let Some((target, fused)) = fused else {
+                new_lines.push(observed);
+                continue;
+            };
+            let mut fused = self.floor_sigmas(fused);
+            let mut count = self.observations(target).saturating_add(1);
+            // Bridging: the fused line may now reach other pieces of the
+            // same wall; absorb them until none is left (each pass removes
+            // a line, so this ends).
+            loop {
+                // The correspondence test looks for a centre within the
+                // other's extent; widen it by the fused length so a long
+                // line finds every piece it touches, then test the gap.
+                let reach = CorrespondenceConfig {
+                    extent_tolerance: fused.length() + self.config.merge_gap,
+                    ..gates
+                };
+                let absorb = self.index.candidates(&fused, &reach).find(|&other| {
+                    other != target
+                        && self.index.get(other).is_some_and(|line| {
+                            collinear(&fused, line, &gates)
+                                && gap_along(&fused, line) <= self.config.merge_gap
+                        })
+                });
+                let Some(other) = absorb else { break };
+                let Some(line) = self.index.remove(other) else {
+                    break;
+                };
+                if let Some(merged) = fuse(&fused, &line) {
+                    fused = self.floor_sigmas(merged);
+                }
+                count = count.saturating_add(self.observations(other));
+                self.set_observations(other, 0);
+                stats.merged += 1;
+            }
+            self.index.update(target, fused);
+            self.set_observations(target, count);
+            stats.fused += 1;
+        }
+        for line in new_lines {
+            let id = self.index.insert(self.floor_sigmas(line));
+            self.set_observations(id, 1);
+            stats.added += 1;
+        }
+        stats
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use std::f64::consts::FRAC_PI_2;
+
+    const NO_COV: [[f64; 3]; 3] = [[0.0; 3]; 3];
+
+    /// A wall along +x from `x0` to `x1` at height `y`, direction 0 (free
+    /// space on its left, above it).
+    fn wall(x0: f64, x1: f64, y: f64, sigma_c: f64, sigma_theta: f64) -> CogLine {
+        let c = 0.5 * (x0 + x1);
+        CogLine::from_centre(0.0, [c, y], x0 - c, x1 - c, sigma_theta, sigma_c, 50)
+    }
+
+    /// Invariants every map must keep: finite lines, extents ordered,
+    /// centres on their lines, σ above the floors, counts for live ids.
+    fn assert_well_formed(map: &SegmentMap) {
+        for seg in map.segments() {
+            let l = seg.line;
+            assert!(l.length().is_finite() && l.xc.is_finite() && l.yc.is_finite());
+            let (s0, s1) = l.extent();
+            assert!(s0 <= s1 + 1e-9, "{l:?}");
+            assert!(l.distance_to_point(l.start) < 1e-9 && l.distance_to_point(l.end) < 1e-9);
+            assert!(l.sigma_c >= map.config().min_sigma_c - 1e-15);
+            assert!(l.sigma_theta >= map.config().min_sigma_theta - 1e-15);
+            assert!(seg.observations >= 1);
+        }
+    }
+
+    #[test]
+    fn two_noisy_views_of_a_wall_fuse_with_smaller_variance_and_union_extent() {
+        let a = wall(0.0, 3.0, 2.0, 0.01, 0.01);
+        let mut b = wall(1.0, 5.0, 2.02, 0.01, 0.01);
+        b = CogLine::from_centre(0.01, b.centre(), -2.0, 2.0, 0.01, 0.01, 50);
+        let f = fuse(&a, &b).unwrap();
+        assert!(f.sigma_c < a.sigma_c && f.sigma_c < b.sigma_c);
+        assert!(f.sigma_theta < a.sigma_theta);
+        // Equal weights: the direction halves the difference.
+        assert!((f.theta - 0.005).abs() < 1e-9, "{}", f.theta);
+        // Offset between the two near the middle of the union.
+        let y_mid = f.yc + (2.5 - f.xc) * f.theta.tan();
+        assert!(y_mid > 2.0 && y_mid < 2.02, "{y_mid}");
+        let (s0, s1) = f.extent();
+        assert!((s1 - s0 - 5.0).abs() < 0.01, "union extent {s0}..{s1}");
+        assert!(f.start[0] < 0.01 && f.end[0] > 4.99);
+
+        let mut map = SegmentMap::new(SegmentMapConfig::default());
+        let s = map.update(&[a], &Pose2::IDENTITY, &NO_COV);
+        assert_eq!((s.added, s.fused), (1, 0));
+        let s = map.update(&[b], &Pose2::IDENTITY, &NO_COV);
+        assert_eq!((s.added, s.fused), (0, 1));
+        assert_eq!(map.len(), 1);
+        let seg = map.segments().next().unwrap();
+        assert_eq!(seg.observations, 2);
+        assert!(seg.line.sigma_c < 0.01);
+        assert_well_formed(&map);
+    }
+
+    #[test]
+    fn the_more_certain_line_dominates() {
+        let sure = wall(0.0, 4.0, 1.0, 0.002, 0.001);
+        let vague = wall(0.0, 4.0, 1.1, 0.05, 0.02);
+        let f = fuse(&sure, &vague).unwrap();
+        assert!((f.yc - 1.0).abs() < 0.001, "{}", f.yc);
+    }
+
+    #[test]
+    fn a_bridging_segment_merges_two_pieces_of_a_wall() {
+        let mut map = SegmentMap::new(SegmentMapConfig::default());
+        // Two pieces seen in one scan (never joined within that scan).
+        let left = wall(0.0, 2.0, 3.0, 0.005, 0.003);
+        let right = wall(2.6, 5.0, 3.0, 0.005, 0.003);
+        let s = map.update(&[left, right], &Pose2::IDENTITY, &NO_COV);
+        assert_eq!((s.added, s.merged), (2, 0));
+        // A later scan sees the wall across the gap.
+        let bridge = wall(1.5, 3.2, 3.01, 0.005, 0.003);
+        let s = map.update(&[bridge], &Pose2::IDENTITY, &NO_COV);
+        assert_eq!((s.fused, s.merged, s.added), (1, 1, 0), "{s:?}");
+        assert_eq!(map.len(), 1);
+        let seg = map.segments().next().unwrap();
+        assert_eq!(seg.observations, 3);
+        let (s0, s1) = seg.line.extent();
+        assert!((s1 - s0 - 5.0).abs() < 0.01);
+        assert_well_formed(&map);
+    }
+
+    #[test]
+    fn doorway_is_not_bridged_by_a_line_that_does_not_reach_across() {
+        let mut map = SegmentMap::new(SegmentMapConfig::default());
+        let left = wall(0.0, 2.0, 3.0, 0.005, 0.003);
+        let right = wall(2.9, 5.0, 3.0, 0.005, 0.003);
+        map.update(&[left, right], &Pose2::IDENTITY, &NO_COV);
+        // Extends the left piece but stops 0.6 m before the right one.
+        let s = map.update(
+            &[wall(1.0, 2.3, 3.0, 0.005, 0.003)],
+            &Pose2::IDENTITY,
+            &NO_COV,
+        );
+        assert_eq!((s.fused, s.merged), (1, 0));
+        assert_eq!(map.len(), 2);
+        assert_well_formed(&map);
+    }
+
+    #[test]
+    fn several_scan_lines_fuse_into_one_map_line() {
+        let mut map = SegmentMap::new(SegmentMapConfig::default());
+        map.update(
+            &[wall(0.0, 6.0, 2.0, 0.005, 0.003)],
+            &Pose2::IDENTITY,
+            &NO_COV,
+        );
+        let pieces = [
+            wall(0.5, 2.0, 2.0, 0.005, 0.003),
+            wall(3.0, 5.0, 2.0, 0.005, 0.003),
+        ];
+        let s = map.update(&pieces, &Pose2::IDENTITY, &NO_COV);
+        assert_eq!((s.fused, s.added), (2, 0));
+        assert_eq!(map.len(), 1);
+        assert_eq!(map.segments().next().unwrap().observations, 3);
+    }
+
+    #[test]
+    fn opposite_faces_and_distant_walls_stay_separate() {
+        let mut map = SegmentMap::new(SegmentMapConfig::default());
+        let front = wall(0.0, 4.0, 2.0, 0.005, 0.003);
+        let back = CogLine::from_centre(
+            std::f64::consts::PI,
+            [2.0, 2.05],
+            -2.0,
+            2.0,
+            0.003,
+            0.005,
+            50,
+        );
+        let other = wall(0.0, 4.0, 2.5, 0.005, 0.003);
+        map.update(&[front], &Pose2::IDENTITY, &NO_COV);
+        let s = map.update(&[back, other], &Pose2::IDENTITY, &NO_COV);
+        assert_eq!(s.added, 2);
+        assert_eq!(map.len(), 3);
+    }
+
+    #[test]
+    fn lines_are_placed_by_the_pose_and_blurred_by_its_covariance() {
+        let pose = Pose2::new(1.0, 2.0, FRAC_PI_2);
+        // A wall 2 m ahead of the robot, across its heading.
+        let local = CogLine::from_centre(FRAC_PI_2, [2.0, 0.0], -1.0, 1.0, 0.002, 0.003, 40);
+        let cov = [[0.01, 0.0, 0.0], [0.0, 0.04, 0.0], [0.0, 0.0, 1e-4]];
+        let g = blur_by_pose(&local, &pose, &cov);
+        assert!((g.xc - 1.0).abs() < 1e-12 && (g.yc - 4.0).abs() < 1e-12);
+        assert!(wrap_angle(g.theta - std::f64::consts::PI).abs() < 1e-12);
+        // Across this wall is map y (σ 0.2 m); the centre lies along the
+        // heading so rotation does not move it across.
+        assert!((g.sigma_c - (0.003f64.powi(2) + 0.04).sqrt()).abs() < 1e-12);
+        assert!((g.sigma_theta - (0.002f64.powi(2) + 1e-4).sqrt()).abs() < 1e-12);
+        let mut map = SegmentMap::new(SegmentMapConfig::default());
+        map.update(&[local], &pose, &cov);
+        assert_eq!(map.segments().next().unwrap().line.centre(), g.centre());
+    }
+
+    #[test]
+    fn fuse_refuses_cancelling_directions() {
+        let a = wall(0.0, 1.0, 0.0, 0.01, 0.01);
+        let b = CogLine::from_centre(std::f64::consts::PI, [0.5, 0.0], -0.5, 0.5, 0.01, 0.01, 5);
+        assert_eq!(fuse(&a, &b), None);
+    }
+
+    #[test]
+    fn snapshot_round_trips_through_json() {
+        let mut map = SegmentMap::new(SegmentMapConfig::default());
+        map.update(
+            &[wall(0.0, 2.0, 1.0, 0.01, 0.01)],
+            &Pose2::IDENTITY,
+            &NO_COV,
+        );
+        let json = serde_json::to_string(&map.snapshot()).unwrap();
+        let back: SegmentMapFile = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, map.snapshot());
+        assert_eq!(back.format, SegmentMapFile::FORMAT);
+    }
+}

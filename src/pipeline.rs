@@ -1,0 +1,547 @@
+//! The offline mapper: scans with odometry in, a trajectory and a map of
+//! actual segments out.
+//!
+//! Per scan: the odometry increment since the previous scan predicts the
+//! pose (see [`MotionPredictor`] for frozen or missing odometry); lines are
+//! extracted; the pose is localized against the map (a failed or
+//! implausible fix is replaced by the prediction and counted); on
+//! keyframes the map is updated; the pose is recorded with the scan's own
+//! timestamp. The map frame is the robot pose at the first scan.
+//!
+//! The map learns only from poses worth trusting: localized ones, the
+//! first scan, and scans of unmapped space (too few matches) predicted
+//! from real odometry. A fix refused for any other reason, or a pose
+//! guessed at constant velocity, leaves the map alone: one wrongly placed
+//! wall misleads every later scan that sees it.
+//!
+//! Only this layer reads a clock (`Instant`, for the per-stage timing);
+//! the algorithms it calls take none, so runs are deterministic.
+
+use crate::eval::{EvalError, RelationErrors, evaluate_relations as evaluate_against};
+use crate::geometry::{CogLine, LineExtractor, Pose2, wrap_angle};
+use crate::input::{InputError, ScanRecord, open_log};
+use crate::localize::{LocalizationResult, LocalizeError, SegmentIndex, localize};
+use crate::map::{KeyframePolicy, SegmentMap};
+use crate::mapping_config::MapperConfig;
+use crate::trajectory::{StampedPose, TrajectoryError, write_tum};
+use nalgebra::{Matrix3, Vector3};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+use thiserror::Error;
+
+mod prediction;
+
+pub use prediction::{MotionPredictor, OdometryFeed, OdometryReading, Prediction};
+use tracing::{debug, trace_span, warn};
+
+/// Name of the trajectory written by [`run_offline_mapping`].
+pub const TRAJECTORY_FILE: &str = "trajectory.tum";
+/// Name of the actual-segment map written by [`run_offline_mapping`].
+pub const SEGMENTS_FILE: &str = "segments.json";
+
+#[derive(Debug, Error)]
+pub enum PipelineError {
+    #[error("cannot read the input")]
+    Input(#[from] InputError),
+    #[error("the input holds no scans")]
+    NoScans,
+    #[error("cannot write {}", path.display())]
+    Output {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("cannot encode the trajectory")]
+    Trajectory(#[from] TrajectoryError),
+    #[error("cannot encode the segment map")]
+    Json(#[from] serde_json::Error),
+}
+
+/// What happened to one scan.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScanOutcome {
+    /// Robot pose in the map frame.
+    pub pose: Pose2,
+    /// Whether localization succeeded (else `pose` is the prediction).
+    pub localized: bool,
+    /// Whether the lines left a translation direction unobservable (the
+    /// prediction was kept along it).
+    pub degenerate: bool,
+    /// Whether the scan updated the map.
+    pub keyframe: bool,
+    /// Lines extracted from the scan.
+    pub lines: usize,
+    /// Lines matched to the map.
+    pub matches: usize,
+    /// Why localization was not used, if it was not (the kinds counted in
+    /// [`MappingSummary::rejections_by_kind`]).
+    pub rejection: Option<String>,
+    /// Whether the pose came from the previous scan's lines because the
+    /// map offered too few matches.
+    pub by_previous_scan: bool,
+}
+
+/// Accumulated wall-clock time of one stage.
+#[derive(Debug, Clone, Copy, Default)]
+struct StageClock {
+    total: Duration,
+    runs: usize,
+}
+
+impl StageClock {
+    fn add(&mut self, d: Duration) {
+        self.total += d;
+        self.runs += 1;
+    }
+
+    fn mean_us(&self) -> f64 {
+        if self.runs == 0 {
+            0.0
+        } else {
+            self.total.as_secs_f64() * 1e6 / self.runs as f64
+        }
+    }
+}
+
+/// Mean time per run of each stage (µs).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct StageTimes {
+    /// Odometry prediction, per scan.
+    pub predict_us: f64,
+    /// Line extraction, per scan.
+    pub extract_us: f64,
+    /// Localization, per scan that had a map to localize against.
+    pub localize_us: f64,
+    /// Map update, per keyframe.
+    pub map_update_us: f64,
+    /// Whole pipeline, per scan.
+    pub per_scan_us: f64,
+}
+
+/// Summary of a mapping run.
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+pub struct MappingSummary {
+    pub scans: usize,
+    pub keyframes: usize,
+    /// Segments in the final map.
+    pub segments: usize,
+    /// Scans whose lines left a direction unobservable (corridors).
+    pub degenerate_scans: usize,
+    /// Scans whose localization failed; the prediction was used.
+    pub rejected_localizations: usize,
+    /// The failures by kind (`TooFewMatches`, `ImplausibleJump`, ...).
+    pub rejections_by_kind: BTreeMap<String, usize>,
+    /// Scans that carried no odometry.
+    pub scans_without_odometry: usize,
+    /// Scans whose odometry equalled the previous scan's (standing still,
+    /// or odometry frozen); predicted at constant velocity.
+    pub scans_with_unchanged_odometry: usize,
+    pub mean_time: StageTimes,
+}
+
+/// Why a scan's localization was not used.
+#[derive(Debug, Clone, PartialEq, Error)]
+enum Rejection {
+    #[error(transparent)]
+    Localize(LocalizeError),
+    #[error("correction of {sigmas:.1} σ from the odometry prediction")]
+    Inconsistent { sigmas: f64 },
+}
+
+impl Rejection {
+    /// Kind name, for the summary: the error variant's name, so kinds the
+    /// localizer adds later are counted without changes here.
+    fn kind(&self) -> String {
+        match self {
+            Rejection::Localize(e) => {
+                let debug = format!("{e:?}");
+                let end = debug
+                    .find(|c: char| !c.is_alphanumeric() && c != '_')
+                    .unwrap_or(debug.len());
+                debug[..end].to_owned()
+            }
+            Rejection::Inconsistent { .. } => "InconsistentWithOdometry".to_owned(),
+        }
+    }
+}
+
+/// Mahalanobis distance (in σ) of `pose` from `predicted` under the
+/// prediction covariance `cov` (x, y, θ); infinite if `cov` is singular.
+fn mahalanobis(pose: &Pose2, predicted: &Pose2, cov: &[[f64; 3]; 3]) -> f64 {
+    let e = Vector3::new(
+        pose.x - predicted.x,
+        pose.y - predicted.y,
+        wrap_angle(pose.theta - predicted.theta),
+    );
+    let m = Matrix3::from_fn(|i, j| cov[i][j]);
+    match m.cholesky() {
+        Some(chol) => e.dot(&chol.solve(&e)).max(0.0).sqrt(),
+        None => f64::INFINITY,
+    }
+}
+
+/// The mapper's state between scans.
+#[derive(Debug)]
+pub struct OfflineMapper {
+    config: MapperConfig,
+    extractor: LineExtractor,
+    lines: Vec<CogLine>,
+    map: SegmentMap,
+    keyframes: KeyframePolicy,
+    odometry: OdometryFeed,
+    predictor: MotionPredictor,
+    /// The previous scan's lines in the map frame, the fallback reference
+    /// when the map offers too little to localize against.
+    previous_scan: SegmentIndex,
+    trajectory: Vec<StampedPose>,
+    summary: MappingSummary,
+    clocks: [StageClock; 5],
+}
+
+const PREDICT: usize = 0;
+const EXTRACT: usize = 1;
+const LOCALIZE: usize = 2;
+const MAP_UPDATE: usize = 3;
+const WHOLE: usize = 4;
+
+impl OfflineMapper {
+    pub fn new(config: MapperConfig) -> Self {
+        OfflineMapper {
+            config,
+            extractor: LineExtractor::new(),
+            lines: Vec::new(),
+            map: SegmentMap::new(config.map),
+            keyframes: KeyframePolicy::new(config.keyframes),
+            odometry: OdometryFeed::new(config.odometry_time_offset),
+            predictor: MotionPredictor::default(),
+            previous_scan: SegmentIndex::new(),
+            trajectory: Vec::new(),
+            summary: MappingSummary::default(),
+            clocks: [StageClock::default(); 5],
+        }
+    }
+
+    pub fn config(&self) -> &MapperConfig {
+        &self.config
+    }
+
+    pub fn map(&self) -> &SegmentMap {
+        &self.map
+    }
+
+    /// One pose per scan processed so far (s, map frame).
+    pub fn trajectory(&self) -> &[StampedPose] {
+        &self.trajectory
+    }
+
+    /// Counters and mean stage times so far.
+    pub fn summary(&self) -> MappingSummary {
+        let mut s = self.summary.clone();
+        s.segments = self.map.len();
+        s.mean_time = StageTimes {
+            predict_us: self.clocks[PREDICT].mean_us(),
+            extract_us: self.clocks[EXTRACT].mean_us(),
+            localize_us: self.clocks[LOCALIZE].mean_us(),
+            map_update_us: self.clocks[MAP_UPDATE].mean_us(),
+            per_scan_us: self.clocks[WHOLE].mean_us(),
+        };
+        s
+    }
+
+    /// Localizes the current lines against the map; when the map offers
+    /// too few matches (curved walls cut into different chords by each
+    /// scan, freshly entered space), against the previous scan's lines,
+    /// which consecutive scans share far more reliably.
+    fn localize_with_fallback(
+        &self,
+        predicted: Pose2,
+        predicted_cov: &[[f64; 3]; 3],
+        outcome: &mut ScanOutcome,
+    ) -> Result<LocalizationResult, Rejection> {
+        let cfg = &self.config.localizer;
+        match localize(&self.lines, self.map.index(), predicted, predicted_cov, cfg) {
+            Err(LocalizeError::TooFewMatches { .. })
+                if self.config.previous_scan_fallback && !self.previous_scan.is_empty() =>
+            {
+                let fix = localize(
+                    &self.lines,
+                    &self.previous_scan,
+                    predicted,
+                    predicted_cov,
+                    cfg,
+                )
+                .map_err(Rejection::Localize)?;
+                outcome.by_previous_scan = true;
+                Ok(fix)
+            }
+            other => other.map_err(Rejection::Localize),
+        }
+    }
+
+    /// Processes one scan; returns what became of it.
+    pub fn process(&mut self, record: &ScanRecord) -> ScanOutcome {
+        let started = Instant::now();
+        let _scan_span = trace_span!("scan", t = record.scan.t).entered();
+        if record.odometry.is_none() {
+            self.summary.scans_without_odometry += 1;
+        }
+
+        let t = Instant::now();
+        let prediction = trace_span!("predict").in_scope(|| {
+            let reading = self.odometry.reading(record.scan.t, record.odometry);
+            if reading == OdometryReading::Stale && record.odometry.is_some() {
+                self.summary.scans_with_unchanged_odometry += 1;
+            }
+            self.predictor.predict(reading, &self.config.odometry)
+        });
+        let (predicted, predicted_cov) = (prediction.pose, prediction.cov);
+        self.clocks[PREDICT].add(t.elapsed());
+
+        let t = Instant::now();
+        trace_span!("extract").in_scope(|| {
+            self.extractor.extract(
+                &record.scan,
+                &self.config.laser_mount,
+                &self.config.extraction,
+                &mut self.lines,
+            )
+        });
+        self.clocks[EXTRACT].add(t.elapsed());
+
+        let mut outcome = ScanOutcome {
+            pose: predicted,
+            localized: false,
+            degenerate: false,
+            keyframe: false,
+            lines: self.lines.len(),
+            matches: 0,
+            rejection: None,
+            by_previous_scan: false,
+        };
+        let mut cov = predicted_cov;
+        // Whether the map may learn from this scan: always when localized
+        // (or on the first scan), and after a failure only when the scan
+        // shows too little known structure to localize (new territory);
+        // other failures mean the pose is doubtful.
+        let mut may_update_map = true;
+        if !self.map.is_empty() {
+            let t = Instant::now();
+            let result = trace_span!("localize")
+                .in_scope(|| self.localize_with_fallback(predicted, &predicted_cov, &mut outcome));
+            self.clocks[LOCALIZE].add(t.elapsed());
+            let result = result.and_then(|fix| {
+                let sigmas = mahalanobis(&fix.pose, &predicted, &predicted_cov);
+                if sigmas > self.config.max_correction_sigmas {
+                    Err(Rejection::Inconsistent { sigmas })
+                } else {
+                    Ok(fix)
+                }
+            });
+            match result {
+                Ok(fix) => {
+                    outcome.pose = fix.pose;
+                    outcome.localized = true;
+                    outcome.degenerate = fix.degenerate.is_some();
+                    outcome.matches = fix.matches.len();
+                    cov = fix.covariance;
+                    if outcome.degenerate {
+                        self.summary.degenerate_scans += 1;
+                    }
+                }
+                Err(e) => {
+                    let kind = e.kind();
+                    may_update_map = self.config.update_map_when_unlocalized
+                        || matches!(e, Rejection::Localize(LocalizeError::TooFewMatches { .. }));
+                    self.summary.rejected_localizations += 1;
+                    *self
+                        .summary
+                        .rejections_by_kind
+                        .entry(kind.clone())
+                        .or_default() += 1;
+                    // Per scan at debug level (hundreds per long log);
+                    // the totals are warned about once at the end.
+                    debug!(
+                        t = record.scan.t,
+                        rejected = self.summary.rejected_localizations,
+                        "localization failed, keeping the odometry prediction: {e}"
+                    );
+                    outcome.rejection = Some(kind);
+                }
+            }
+        }
+
+        // Nor does an unlocalized pose predicted without fresh odometry:
+        // constant velocity is a guess, and frozen odometry happens in
+        // fast turns, where a wrong heading misplaces walls the most.
+        may_update_map &= outcome.localized || prediction.from_odometry || self.map.is_empty();
+        if may_update_map && self.keyframes.is_keyframe(&outcome.pose) {
+            let t = Instant::now();
+            trace_span!("map_update")
+                .in_scope(|| self.map.update(&self.lines, &outcome.pose, &cov));
+            self.clocks[MAP_UPDATE].add(t.elapsed());
+            outcome.keyframe = true;
+            self.summary.keyframes += 1;
+        }
+
+        self.predictor.record(outcome.pose, cov, outcome.localized);
+        if self.config.previous_scan_fallback {
+            self.previous_scan = SegmentIndex::new();
+            for line in &self.lines {
+                self.previous_scan.insert(line.transformed(&outcome.pose));
+            }
+        }
+        self.trajectory.push((record.scan.t, outcome.pose));
+        self.summary.scans += 1;
+        self.clocks[WHOLE].add(started.elapsed());
+        outcome
+    }
+}
+
+/// Progress of [`run_offline_mapping`], reported after every scan.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Progress {
+    pub scans: usize,
+    /// Bytes of the input consumed so far.
+    pub bytes_read: u64,
+    /// Size of the input (bytes).
+    pub bytes_total: u64,
+}
+
+/// Writes `bytes` to `path` atomically: a temporary file beside it,
+/// flushed to disk, then renamed over the target.
+fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), PipelineError> {
+    let output_error = |source| PipelineError::Output {
+        path: path.to_owned(),
+        source,
+    };
+    let mut tmp_name = path.as_os_str().to_owned();
+    tmp_name.push(".tmp");
+    let tmp = PathBuf::from(tmp_name);
+    let mut file = std::fs::File::create(&tmp).map_err(output_error)?;
+    file.write_all(bytes).map_err(output_error)?;
+    file.sync_all().map_err(output_error)?;
+    drop(file);
+    std::fs::rename(&tmp, path).map_err(output_error)
+}
+
+/// Maps a log file offline and writes `trajectory.tum` and `segments.json`
+/// into `out_dir` (created if needed). The first unreadable line ends the
+/// run with an error naming it; nothing is written then.
+pub fn run_offline_mapping(
+    input: &Path,
+    out_dir: &Path,
+    config: &MapperConfig,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<MappingSummary, PipelineError> {
+    let mut log = open_log(input)?;
+    let mut mapper = OfflineMapper::new(*config);
+    while let Some(record) = log.next() {
+        mapper.process(&record?);
+        progress(Progress {
+            scans: mapper.summary.scans,
+            bytes_read: log.bytes_read(),
+            bytes_total: log.size(),
+        });
+    }
+    if mapper.trajectory().is_empty() {
+        return Err(PipelineError::NoScans);
+    }
+    let summary = mapper.summary();
+    if summary.rejected_localizations > 0 {
+        warn!(
+            rejected = summary.rejected_localizations,
+            scans = summary.scans,
+            by_kind = ?summary.rejections_by_kind,
+            "localization failed on some scans; their odometry prediction was used"
+        );
+    }
+    std::fs::create_dir_all(out_dir).map_err(|source| PipelineError::Output {
+        path: out_dir.to_owned(),
+        source,
+    })?;
+    let mut tum = Vec::new();
+    write_tum(&mut tum, mapper.trajectory())?;
+    write_atomically(&out_dir.join(TRAJECTORY_FILE), &tum)?;
+    let json = serde_json::to_vec_pretty(&mapper.map().snapshot())?;
+    write_atomically(&out_dir.join(SEGMENTS_FILE), &json)?;
+    Ok(summary)
+}
+
+/// The relation metric of a trajectory against a relations file; see
+/// [`crate::eval`].
+pub fn evaluate_relations(
+    trajectory: &[StampedPose],
+    relations_path: &Path,
+) -> Result<RelationErrors, EvalError> {
+    evaluate_against(trajectory, relations_path)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::geometry::RangeScan;
+    use crate::sim::{Rng, ScanSpec, World, cast_scan};
+
+    #[test]
+    fn first_scan_defines_the_map_frame_and_is_a_keyframe() {
+        let world = World::room_with_boxes();
+        let spec = ScanSpec::lms200_half_degree(0.0);
+        let mut rng = Rng::new(1);
+        let odo = Pose2::new(1.0, 1.0, 0.3);
+        let scan: RangeScan = cast_scan(&world, &odo, &spec, 0.0, &mut rng);
+        let mut mapper = OfflineMapper::new(MapperConfig::default());
+        let out = mapper.process(&ScanRecord {
+            scan,
+            odometry: Some(odo),
+        });
+        assert_eq!(out.pose, Pose2::IDENTITY);
+        assert!(out.keyframe && !out.localized);
+        assert!(mapper.map().len() >= 3, "{} segments", mapper.map().len());
+    }
+
+    #[test]
+    fn only_trusted_poses_update_the_map() {
+        let world = World::room_with_boxes();
+        let spec = ScanSpec::lms200_half_degree(0.0);
+        let mut rng = Rng::new(2);
+        let start = Pose2::new(3.0, 3.0, 0.0);
+        let blind = |t: f64| RangeScan {
+            t,
+            angle_min: -std::f64::consts::FRAC_PI_2,
+            angle_increment: std::f64::consts::PI / 360.0,
+            ranges: vec![Err(crate::geometry::BeamFault::NoReturn); 361],
+        };
+        let mut mapper = OfflineMapper::new(MapperConfig::default());
+        let first = mapper.process(&ScanRecord {
+            scan: cast_scan(&world, &start, &spec, 0.0, &mut rng),
+            odometry: Some(start),
+        });
+        assert!(first.keyframe);
+        // No lines: too few matches, but real odometry moved 0.5 m, so the
+        // scan counts as new territory and may update the map.
+        let moved = Pose2::new(3.5, 3.0, 0.0);
+        let second = mapper.process(&ScanRecord {
+            scan: blind(0.2),
+            odometry: Some(moved),
+        });
+        assert_eq!(second.rejection.as_deref(), Some("TooFewMatches"));
+        assert!(second.keyframe);
+        assert!((second.pose.x - 0.5).abs() < 1e-9);
+        // Frozen odometry: predicted at constant velocity (another 0.5 m),
+        // which is a guess, so the map is left alone.
+        let third = mapper.process(&ScanRecord {
+            scan: blind(0.4),
+            odometry: Some(moved),
+        });
+        assert!((third.pose.x - 1.0).abs() < 1e-9, "{:?}", third.pose);
+        assert!(!third.keyframe);
+        let summary = mapper.summary();
+        assert_eq!(summary.rejected_localizations, 2);
+        assert_eq!(summary.scans_with_unchanged_odometry, 1);
+        assert_eq!(summary.keyframes, 2);
+    }
+}

@@ -1,0 +1,354 @@
+//! The pose prediction from odometry: time alignment, frozen odometry, and
+//! the covariance of the prediction.
+//!
+//! Logs show odometry freezing for several scans and then jumping by the
+//! motion of the whole gap (CSAIL at 68.5 s, 170.3 s and 337.2 s: four
+//! scans of unchanged odometry, then up to 0.9 m and 50° at once). A
+//! reading identical to the previous one is therefore not taken as "no
+//! motion": such scans, and scans without odometry, are predicted at
+//! constant velocity with the no-odometry noise. When odometry moves
+//! again, either localization tracked the robot through the whole gap —
+//! then the tracked pose is kept and the odometry merely re-anchored — or
+//! it did not, and the odometry increment since the last fresh scan is
+//! applied from that scan's pose, with the noise of the missed scans
+//! added, so no motion is counted twice or lost.
+
+use crate::geometry::Pose2;
+use crate::input::OdometryTrack;
+use crate::mapping_config::OdometryNoise;
+use nalgebra::Matrix3;
+
+/// Covariance of a pose (x, y, θ; m², m·rad, rad²).
+pub type Covariance = [[f64; 3]; 3];
+
+/// The odometry to use for one scan.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum OdometryReading {
+    /// No odometry, or odometry unchanged since the previous scan.
+    Stale,
+    /// Odometry at the (shifted) scan time, interpolated across a freeze:
+    /// it holds part of a lumped jump.
+    Lumped(Pose2),
+    /// Odometry at the (shifted) scan time from regularly moving samples.
+    Fresh(Pose2),
+}
+
+/// Turns each scan's logged odometry into an [`OdometryReading`]: drops
+/// unchanged samples and, with a time offset, interpolates the remaining
+/// ones at the scan time plus the offset.
+#[derive(Debug, Default)]
+pub struct OdometryFeed {
+    offset: f64,
+    /// Samples that moved, by scan time.
+    track: OdometryTrack,
+    last_raw: Option<Pose2>,
+    /// Whether samples were unchanged since the last moving one.
+    in_gap: bool,
+    /// Time of the first moving sample after a freeze: interpolation
+    /// before it spreads the lumped jump.
+    lump_until: Option<f64>,
+}
+
+impl OdometryFeed {
+    /// `offset` (s) is added to scan times to read the odometry; only
+    /// offsets ≤ 0 can be honoured while streaming (a positive one holds
+    /// the newest sample).
+    pub fn new(offset: f64) -> Self {
+        OdometryFeed {
+            offset,
+            ..Self::default()
+        }
+    }
+
+    /// The reading for a scan at `t` (s) whose record carries `raw`.
+    pub fn reading(&mut self, t: f64, raw: Option<Pose2>) -> OdometryReading {
+        let Some(raw) = raw else {
+            return OdometryReading::Stale;
+        };
+        if self.last_raw == Some(raw) {
+            self.in_gap = true;
+            return OdometryReading::Stale;
+        }
+        self.last_raw = Some(raw);
+        // An out-of-order time restarts the track rather than failing.
+        if self.track.push(t, raw).is_err() {
+            self.track = OdometryTrack::new();
+            self.lump_until = None;
+            if self.track.push(t, raw).is_err() {
+                return OdometryReading::Stale;
+            }
+        }
+        if std::mem::take(&mut self.in_gap) {
+            self.lump_until = Some(t);
+        }
+        let shifted = t + self.offset.min(0.0);
+        let Some(pose) = self.track.at(shifted) else {
+            return OdometryReading::Stale;
+        };
+        self.track.discard_before(shifted);
+        match self.lump_until {
+            Some(end) if shifted < end => OdometryReading::Lumped(pose),
+            _ => {
+                self.lump_until = None;
+                OdometryReading::Fresh(pose)
+            }
+        }
+    }
+}
+
+/// The last scan that had usable odometry, with its final estimate.
+#[derive(Debug, Clone, Copy)]
+struct Anchor {
+    odometry: Pose2,
+    pose: Pose2,
+    cov: Covariance,
+    /// Scans since whose odometry was stale (or only partly lumped).
+    stale_scans: usize,
+    /// Whether every one of those scans was localized.
+    gap_tracked: bool,
+}
+
+/// A prediction and what the predictor needs to know about it afterwards.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Prediction {
+    pub pose: Pose2,
+    pub cov: Covariance,
+    /// Whether the prediction rests on odometry (not constant velocity).
+    pub from_odometry: bool,
+}
+
+/// Predicts each scan's pose from the previous results and odometry.
+#[derive(Debug, Default)]
+pub struct MotionPredictor {
+    anchor: Option<Anchor>,
+    /// Pose and covariance after the previous scan.
+    last: Option<(Pose2, Covariance)>,
+    /// Estimated motion over the previous scan interval (robot frame).
+    last_step: Option<Pose2>,
+    /// The reading of the scan being processed, until `record`.
+    pending: Option<OdometryReading>,
+}
+
+fn add_scaled(q: &mut Covariance, other: &Covariance, k: f64) {
+    for (row, orow) in q.iter_mut().zip(other) {
+        for (v, o) in row.iter_mut().zip(orow) {
+            *v += k * o;
+        }
+    }
+}
+
+/// `base ∘ step` with covariance `J Σbase Jᵀ + Q`, `J = ∂(base ∘ step)/∂base`.
+/// `Q` needs no rotation into the map frame: its translation part is
+/// isotropic.
+fn compose(
+    base: &Pose2,
+    base_cov: &Covariance,
+    step: &Pose2,
+    q: &Covariance,
+) -> (Pose2, Covariance) {
+    let pose = base.compose(step);
+    let (dx, dy) = (pose.x - base.x, pose.y - base.y);
+    let j = Matrix3::new(1.0, 0.0, -dy, 0.0, 1.0, dx, 0.0, 0.0, 1.0);
+    let base_cov = Matrix3::from_fn(|r, c| base_cov[r][c]);
+    let cov = j * base_cov * j.transpose() + Matrix3::from_fn(|r, c| q[r][c]);
+    (
+        pose,
+        std::array::from_fn(|r| std::array::from_fn(|c| cov[(r, c)])),
+    )
+}
+
+impl MotionPredictor {
+    /// The prediction for the next scan. The first scan defines the map
+    /// frame: the identity, known up to the floor that keeps the prior
+    /// invertible.
+    pub fn predict(&mut self, reading: OdometryReading, noise: &OdometryNoise) -> Prediction {
+        self.pending = Some(reading);
+        let Some((prev, prev_cov)) = self.last else {
+            return Prediction {
+                pose: Pose2::IDENTITY,
+                cov: noise.increment_covariance(Some(&Pose2::IDENTITY)),
+                from_odometry: true,
+            };
+        };
+        let constant_velocity = || {
+            let step = self.last_step.unwrap_or(Pose2::IDENTITY);
+            let (pose, cov) = compose(&prev, &prev_cov, &step, &noise.increment_covariance(None));
+            Prediction {
+                pose,
+                cov,
+                from_odometry: false,
+            }
+        };
+        let (odometry, anchor) = match (reading, &self.anchor) {
+            (OdometryReading::Stale, _) | (_, None) => return constant_velocity(),
+            (OdometryReading::Lumped(_), Some(a)) if a.gap_tracked => return constant_velocity(),
+            (OdometryReading::Fresh(_), Some(a)) if a.stale_scans > 0 && a.gap_tracked => {
+                return constant_velocity();
+            }
+            (OdometryReading::Lumped(o) | OdometryReading::Fresh(o), Some(a)) => (o, a),
+        };
+        let step = anchor.odometry.between(&odometry);
+        let mut q = noise.increment_covariance(Some(&step));
+        add_scaled(
+            &mut q,
+            &noise.increment_covariance(None),
+            anchor.stale_scans as f64,
+        );
+        let (pose, cov) = compose(&anchor.pose, &anchor.cov, &step, &q);
+        Prediction {
+            pose,
+            cov,
+            from_odometry: true,
+        }
+    }
+
+    /// Records the final estimate of the scan last predicted.
+    pub fn record(&mut self, pose: Pose2, cov: Covariance, localized: bool) {
+        if let Some((prev, _)) = self.last {
+            self.last_step = Some(prev.between(&pose));
+        }
+        self.last = Some((pose, cov));
+        let reanchor = match (self.pending.take(), &mut self.anchor) {
+            (Some(OdometryReading::Fresh(o)), _) => Some(o),
+            (Some(OdometryReading::Lumped(o)), Some(a)) if !a.gap_tracked => Some(o),
+            (Some(OdometryReading::Lumped(o)), None) => Some(o),
+            (_, Some(a)) => {
+                a.stale_scans += 1;
+                a.gap_tracked &= localized;
+                None
+            }
+            (_, None) => None,
+        };
+        if let Some(odometry) = reanchor {
+            self.anchor = Some(Anchor {
+                odometry,
+                pose,
+                cov,
+                stale_scans: 0,
+                gap_tracked: true,
+            });
+        }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    const NOISE: OdometryNoise = OdometryNoise {
+        translation_per_metre: 0.1,
+        translation_per_radian: 0.02,
+        rotation_per_radian: 0.2,
+        rotation_per_metre: 0.02,
+        min_translation: 0.01,
+        min_rotation: 0.005,
+        missing_translation: 0.3,
+        missing_rotation: 0.15,
+    };
+
+    fn run(
+        odometry: &[Option<Pose2>],
+        localized: impl Fn(usize) -> bool,
+        offset: f64,
+    ) -> Vec<Prediction> {
+        let mut feed = OdometryFeed::new(offset);
+        let mut predictor = MotionPredictor::default();
+        let mut out = Vec::new();
+        for (k, o) in odometry.iter().enumerate() {
+            let reading = feed.reading(0.2 * k as f64, *o);
+            let p = predictor.predict(reading, &NOISE);
+            // Pretend localization confirmed the prediction.
+            predictor.record(p.pose, p.cov, localized(k));
+            out.push(p);
+        }
+        out
+    }
+
+    fn x(v: f64) -> Option<Pose2> {
+        Some(Pose2::new(v, 0.0, 0.0))
+    }
+
+    #[test]
+    fn odometry_increments_move_the_pose() {
+        let p = run(&[x(5.0), x(5.1), x(5.3)], |_| true, 0.0);
+        assert_eq!(p[0].pose, Pose2::IDENTITY);
+        assert!((p[2].pose.x - 0.3).abs() < 1e-12);
+        assert!(p[2].cov[0][0] > p[1].cov[0][0], "uncertainty grows");
+    }
+
+    #[test]
+    fn an_untracked_freeze_keeps_the_lumped_jump_once() {
+        // Moving 0.1 m per scan; odometry frozen for three scans, then the
+        // whole motion at once. Localization fails during the freeze.
+        let odo = [
+            x(0.0),
+            x(0.1),
+            x(0.2),
+            x(0.2),
+            x(0.2),
+            x(0.2),
+            x(0.6),
+            x(0.7),
+        ];
+        let p = run(&odo, |k| !(3..=5).contains(&k), 0.0);
+        // Constant velocity during the freeze...
+        assert!((p[3].pose.x - 0.3).abs() < 1e-12 && !p[3].from_odometry);
+        // ...then the odometry from the last fresh scan: the truth again.
+        assert!((p[6].pose.x - 0.6).abs() < 1e-12 && p[6].from_odometry);
+        assert!((p[7].pose.x - 0.7).abs() < 1e-12);
+        // The resumed prediction carries the missed scans' noise.
+        assert!(p[6].cov[0][0] > 3.0 * NOISE.missing_translation.powi(2));
+    }
+
+    #[test]
+    fn a_tracked_freeze_keeps_the_tracked_poses() {
+        let odo = [
+            x(0.0),
+            x(0.1),
+            x(0.2),
+            x(0.2),
+            x(0.2),
+            x(0.2),
+            x(0.6),
+            x(0.7),
+        ];
+        let p = run(&odo, |_| true, 0.0);
+        // Constant velocity through the gap and on resumption (0.1 m per
+        // scan), then odometry increments again from the re-anchor.
+        assert!((p[6].pose.x - 0.6).abs() < 1e-12 && !p[6].from_odometry);
+        assert!((p[7].pose.x - 0.7).abs() < 1e-12 && p[7].from_odometry);
+    }
+
+    #[test]
+    fn a_time_offset_interpolates_and_spreads_a_lump() {
+        let odo = [x(0.0), x(0.1), x(0.2), x(0.3), x(0.4)];
+        let p = run(&odo, |_| true, -0.1);
+        // Half a scan earlier: 0.05 m behind the logged odometry.
+        assert!((p[3].pose.x - 0.25).abs() < 1e-12, "{:?}", p[3].pose);
+
+        let mut feed = OdometryFeed::new(-0.1);
+        let readings: Vec<_> = [x(0.0), x(0.1), x(0.1), x(0.1), x(0.4), x(0.5)]
+            .iter()
+            .enumerate()
+            .map(|(k, o)| feed.reading(0.2 * k as f64, *o))
+            .collect();
+        assert_eq!(readings[2], OdometryReading::Stale);
+        // 0.7 s lies between the samples at 0.2 s and 0.8 s: lumped.
+        assert_eq!(
+            readings[4],
+            OdometryReading::Lumped(Pose2::new(0.35, 0.0, 0.0))
+        );
+        assert!(matches!(readings[5], OdometryReading::Fresh(_)));
+    }
+
+    #[test]
+    fn missing_odometry_is_stale() {
+        let mut feed = OdometryFeed::new(0.0);
+        assert_eq!(feed.reading(0.0, None), OdometryReading::Stale);
+        assert_eq!(
+            feed.reading(0.2, x(1.0)),
+            OdometryReading::Fresh(Pose2::new(1.0, 0.0, 0.0))
+        );
+    }
+}

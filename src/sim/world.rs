@@ -1,0 +1,223 @@
+//! Simulated worlds: wall segments in the map frame (m) with a parry BVH
+//! for ray casting, and a few built-in floor plans.
+
+use parry2d_f64::bounding_volume::Aabb;
+use parry2d_f64::math::Vector;
+use parry2d_f64::partitioning::Bvh;
+use parry2d_f64::query::{Ray, RayCast};
+use parry2d_f64::shape::Segment;
+
+/// A set of wall segments a simulated laser can see.
+#[derive(Debug, Clone, Default)]
+pub struct World {
+    walls: Vec<[[f64; 2]; 2]>,
+    bvh: Bvh,
+}
+
+impl World {
+    /// An empty world.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// A world made of the given wall segments.
+    pub fn from_segments(walls: impl IntoIterator<Item = [[f64; 2]; 2]>) -> Self {
+        let mut w = World::new();
+        for [a, b] in walls {
+            w.add_wall(a, b);
+        }
+        w
+    }
+
+    /// Adds the wall from `a` to `b` (m). Non-finite walls are ignored.
+    pub fn add_wall(&mut self, a: [f64; 2], b: [f64; 2]) {
+        if ![a[0], a[1], b[0], b[1]].iter().all(|v| v.is_finite()) {
+            return;
+        }
+        let Ok(key) = u32::try_from(self.walls.len()) else {
+            return;
+        };
+        let aabb = Aabb::new(
+            Vector::new(a[0].min(b[0]), a[1].min(b[1])),
+            Vector::new(a[0].max(b[0]), a[1].max(b[1])),
+        );
+        self.walls.push([a, b]);
+        self.bvh.insert(aabb, key);
+    }
+
+    /// Adds the walls of a polyline through `points`, closed back to the
+    /// first point when `closed`.
+    pub fn add_polyline(&mut self, points: &[[f64; 2]], closed: bool) {
+        for w in points.windows(2) {
+            self.add_wall(w[0], w[1]);
+        }
+        if closed && points.len() > 2 {
+            self.add_wall(points[points.len() - 1], points[0]);
+        }
+    }
+
+    /// Adds a rectangular box centred at `centre` with half sizes `half`
+    /// (m), turned by `angle` (rad).
+    pub fn add_box(&mut self, centre: [f64; 2], half: [f64; 2], angle: f64) {
+        let (s, c) = angle.sin_cos();
+        let corner = |u: f64, v: f64| {
+            [
+                centre[0] + c * u * half[0] - s * v * half[1],
+                centre[1] + s * u * half[0] + c * v * half[1],
+            ]
+        };
+        let pts = [
+            corner(-1.0, -1.0),
+            corner(1.0, -1.0),
+            corner(1.0, 1.0),
+            corner(-1.0, 1.0),
+        ];
+        self.add_polyline(&pts, true);
+    }
+
+    /// The walls, in insertion order.
+    pub fn walls(&self) -> &[[[f64; 2]; 2]] {
+        &self.walls
+    }
+
+    /// Distance (m) from `origin` along the unit vector `dir` to the first
+    /// wall, if one is hit within `max_range`.
+    pub fn cast_ray(&self, origin: [f64; 2], dir: [f64; 2], max_range: f64) -> Option<f64> {
+        let ray = Ray::new(
+            Vector::new(origin[0], origin[1]),
+            Vector::new(dir[0], dir[1]),
+        );
+        self.bvh
+            .cast_ray(&ray, max_range, |leaf, best| {
+                let [a, b] = *self.walls.get(leaf as usize)?;
+                Segment::new(Vector::new(a[0], a[1]), Vector::new(b[0], b[1]))
+                    .cast_local_ray(&ray, best, true)
+            })
+            .map(|(_, toi)| toi)
+    }
+
+    /// An 8 m × 6 m room with a cut corner (a 45° wall), three boxes of
+    /// furniture (one turned) and the four 4 cm legs of a chair. Free floor
+    /// around (1.5..7, 1..5) except the furniture.
+    pub fn room_with_boxes() -> World {
+        let mut w = World::new();
+        w.add_polyline(
+            &[[0.0, 0.0], [8.0, 0.0], [8.0, 6.0], [1.0, 6.0], [0.0, 5.0]],
+            true,
+        );
+        w.add_box([2.2, 4.3], [0.5, 0.3], 0.3);
+        w.add_box([6.3, 1.2], [0.4, 0.4], 0.0);
+        w.add_box([5.6, 5.65], [0.6, 0.35], 0.0);
+        for (dx, dy) in [(-0.2, -0.2), (0.2, -0.2), (0.2, 0.2), (-0.2, 0.2)] {
+            w.add_box([3.6 + dx, 1.6 + dy], [0.02, 0.02], 0.0);
+        }
+        w
+    }
+
+    /// A straight corridor along +x from x = 0 to `length`, `width` wide,
+    /// centred on y = 0, closed at both ends. With `door_spacing`, door
+    /// recesses 0.9 m wide and 0.15 m deep alternate between the two sides,
+    /// the first at x = `door_spacing`.
+    pub fn corridor(length: f64, width: f64, door_spacing: Option<f64>) -> World {
+        const DOOR_WIDTH: f64 = 0.9;
+        const DOOR_DEPTH: f64 = 0.15;
+        let h = 0.5 * width;
+        let mut doors = Vec::new();
+        if let Some(spacing) = door_spacing.filter(|s| *s > DOOR_WIDTH) {
+            let mut x = spacing;
+            while x + DOOR_WIDTH < length {
+                doors.push(x);
+                x += spacing;
+            }
+        }
+        let mut w = World::new();
+        for (side, sign) in [(0usize, -1.0), (1usize, 1.0)] {
+            let y = sign * h;
+            let mut pts = vec![[0.0, y]];
+            for &x in doors.iter().skip(side).step_by(2) {
+                let back = y + sign * DOOR_DEPTH;
+                pts.extend([
+                    [x, y],
+                    [x, back],
+                    [x + DOOR_WIDTH, back],
+                    [x + DOOR_WIDTH, y],
+                ]);
+            }
+            pts.push([length, y]);
+            w.add_polyline(&pts, false);
+        }
+        w.add_wall([0.0, -h], [0.0, h]);
+        w.add_wall([length, -h], [length, h]);
+        w
+    }
+
+    /// A 30 m corridor, 2 m wide, with a door every 5 m.
+    pub fn corridor_with_doors() -> World {
+        World::corridor(30.0, 2.0, Some(5.0))
+    }
+
+    /// A 2 m wide loop around a central 8 m × 6 m block: outer walls
+    /// (0, 0)–(12, 10), block (2, 2)–(10, 8).
+    pub fn loop_around_block() -> World {
+        let mut w = World::new();
+        w.add_polyline(&[[0.0, 0.0], [12.0, 0.0], [12.0, 10.0], [0.0, 10.0]], true);
+        w.add_polyline(&[[2.0, 2.0], [2.0, 8.0], [10.0, 8.0], [10.0, 2.0]], true);
+        w
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ray_hits_nearest_wall() {
+        let w = World::loop_around_block();
+        let d = w.cast_ray([1.0, 5.0], [1.0, 0.0], 20.0).unwrap();
+        assert!((d - 1.0).abs() < 1e-12);
+        let d = w.cast_ray([1.0, 5.0], [-1.0, 0.0], 20.0).unwrap();
+        assert!((d - 1.0).abs() < 1e-12);
+        assert_eq!(w.cast_ray([1.0, 5.0], [-1.0, 0.0], 0.5), None);
+    }
+
+    #[test]
+    fn ray_matches_brute_force_in_the_room() {
+        let w = World::room_with_boxes();
+        for k in 0..720 {
+            let a = k as f64 * std::f64::consts::TAU / 720.0;
+            let dir = [a.cos(), a.sin()];
+            let origin = [4.0, 3.0];
+            let got = w.cast_ray(origin, dir, 100.0);
+            let brute = w
+                .walls()
+                .iter()
+                .filter_map(|&[p, q]| {
+                    // Solve origin + t·dir = p + u·(q − p).
+                    let e = [q[0] - p[0], q[1] - p[1]];
+                    let den = dir[0] * e[1] - dir[1] * e[0];
+                    if den.abs() < 1e-15 {
+                        return None;
+                    }
+                    let f = [p[0] - origin[0], p[1] - origin[1]];
+                    let t = (f[0] * e[1] - f[1] * e[0]) / den;
+                    let u = (f[0] * dir[1] - f[1] * dir[0]) / den;
+                    (t >= 0.0 && (0.0..=1.0).contains(&u)).then_some(t)
+                })
+                .fold(f64::INFINITY, f64::min);
+            let got = got.unwrap();
+            assert!((got - brute).abs() < 1e-9, "beam {k}: {got} vs {brute}");
+        }
+    }
+
+    #[test]
+    fn corridor_doors_alternate_sides() {
+        let w = World::corridor(12.0, 2.0, Some(5.0));
+        // Door at x = 5 on the right (y < 0), at x = 10 on the left.
+        let right = w.cast_ray([5.45, 0.0], [0.0, -1.0], 10.0).unwrap();
+        let left = w.cast_ray([5.45, 0.0], [0.0, 1.0], 10.0).unwrap();
+        assert!((right - 1.15).abs() < 1e-12 && (left - 1.0).abs() < 1e-12);
+        let left = w.cast_ray([10.45, 0.0], [0.0, 1.0], 10.0).unwrap();
+        assert!((left - 1.15).abs() < 1e-12);
+    }
+}

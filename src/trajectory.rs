@@ -1,0 +1,120 @@
+//! Trajectories as TUM text: one pose per line, `t x y z qx qy qz qw`
+//! (s, m, unit quaternion), so standard tools (evo, the TUM scripts) read
+//! them. Planar poses are written with z = 0 and a rotation about z.
+
+use crate::geometry::Pose2;
+use std::io::{BufRead, Write};
+use thiserror::Error;
+
+/// A timestamped planar pose (s; map frame, m and rad).
+pub type StampedPose = (f64, Pose2);
+
+#[derive(Debug, Error)]
+pub enum TrajectoryError {
+    #[error("trajectory I/O failed")]
+    Io(#[from] std::io::Error),
+    #[error("line {line}: expected 8 numbers `t x y z qx qy qz qw`, found {found:?}")]
+    Malformed { line: usize, found: String },
+    #[error("line {line}: quaternion has zero length")]
+    ZeroQuaternion { line: usize },
+}
+
+/// Writes a trajectory. Times keep microseconds (the CARMEN resolution),
+/// positions micrometres.
+pub fn write_tum<W: Write>(out: &mut W, poses: &[StampedPose]) -> Result<(), TrajectoryError> {
+    writeln!(out, "# timestamp x y z qx qy qz qw")?;
+    for (t, p) in poses {
+        let (s, c) = (p.theta / 2.0).sin_cos();
+        writeln!(out, "{t:.6} {:.6} {:.6} 0 0 0 {s:.9} {c:.9}", p.x, p.y)?;
+    }
+    Ok(())
+}
+
+/// Reads a TUM trajectory, projecting each pose onto the plane (yaw of the
+/// quaternion, z dropped). Comments (`#`) and blank lines are skipped.
+pub fn read_tum<R: BufRead>(input: R) -> Result<Vec<StampedPose>, TrajectoryError> {
+    let mut poses = Vec::new();
+    for (idx, line) in input.lines().enumerate() {
+        let line = line?;
+        let number = idx + 1;
+        let body = line.trim();
+        if body.is_empty() || body.starts_with('#') {
+            continue;
+        }
+        let malformed = || TrajectoryError::Malformed {
+            line: number,
+            found: body.to_owned(),
+        };
+        let values: Vec<f64> = body
+            .split_ascii_whitespace()
+            .map(str::parse::<f64>)
+            .collect::<Result<_, _>>()
+            .map_err(|_| malformed())?;
+        let &[t, x, y, _z, qx, qy, qz, qw] = values.as_slice() else {
+            return Err(malformed());
+        };
+        if !values.iter().all(|v| v.is_finite()) {
+            return Err(malformed());
+        }
+        let norm2 = qx * qx + qy * qy + qz * qz + qw * qw;
+        if norm2 <= f64::EPSILON {
+            return Err(TrajectoryError::ZeroQuaternion { line: number });
+        }
+        // Yaw of a (possibly non-planar) rotation; scale-free, so an
+        // unnormalised quaternion gives the same angle.
+        let yaw = (2.0 * (qw * qz + qx * qy)).atan2(norm2 - 2.0 * (qy * qy + qz * qz));
+        poses.push((t, Pose2::new(x, y, yaw)));
+    }
+    Ok(poses)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::geometry::wrap_angle;
+    use proptest::prelude::*;
+
+    proptest! {
+        #[test]
+        fn round_trip(
+            raw in proptest::collection::vec(
+                (0.0f64..2e9, -1e3f64..1e3, -1e3f64..1e3, -3.2f64..3.2), 0..20)
+        ) {
+            let poses: Vec<StampedPose> =
+                raw.iter().map(|&(t, x, y, th)| (t, Pose2::new(x, y, th))).collect();
+            let mut buf = Vec::new();
+            write_tum(&mut buf, &poses).unwrap();
+            let back = read_tum(&buf[..]).unwrap();
+            prop_assert_eq!(back.len(), poses.len());
+            for ((ta, a), (tb, b)) in poses.iter().zip(&back) {
+                prop_assert!((ta - tb).abs() <= 1e-6);
+                prop_assert!((a.x - b.x).abs() <= 1e-6 && (a.y - b.y).abs() <= 1e-6);
+                prop_assert!(wrap_angle(a.theta - b.theta).abs() <= 1e-8);
+            }
+        }
+    }
+
+    #[test]
+    fn reads_yaw_from_a_general_quaternion() {
+        // 90° about z, scaled by 2: yaw must still be π/2.
+        let s = std::f64::consts::FRAC_1_SQRT_2 * 2.0;
+        let text = format!("1.0 0 0 0 0 0 {s} {s}\n");
+        let p = read_tum(text.as_bytes()).unwrap();
+        assert!((p[0].1.theta - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn malformed_lines_are_reported_with_their_number() {
+        let text = "# header\n1 0 0 0 0 0 0 1\n2 0 0 0 0 0 1\n";
+        assert!(matches!(
+            read_tum(text.as_bytes()),
+            Err(TrajectoryError::Malformed { line: 3, .. })
+        ));
+        let zero = "1 0 0 0 0 0 0 0\n";
+        assert!(matches!(
+            read_tum(zero.as_bytes()),
+            Err(TrajectoryError::ZeroQuaternion { line: 1 })
+        ));
+    }
+}

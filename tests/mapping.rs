@@ -1,0 +1,294 @@
+//! Offline mapping end to end: on the first scans of the real MIT CSAIL
+//! log (scored with the Kümmerle et al. relations), on a simulated loop
+//! with biased odometry, and through `run_offline_mapping`'s files.
+//!
+//! The CSAIL parts read `../shared/datasets/mit-csail/` relative to the
+//! crate root and are skipped, with a message, when it is absent.
+
+#![allow(clippy::unwrap_used)]
+
+use clsmap::eval::{Relation, RelationErrors, evaluate, read_relations};
+use clsmap::geometry::{Pose2, wrap_angle};
+use clsmap::input::{ScanRecord, open_log};
+use clsmap::map::SegmentMapFile;
+use clsmap::mapping_config::MapperConfig;
+use clsmap::pipeline::{OfflineMapper, Progress, run_offline_mapping};
+use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
+use clsmap::trajectory::read_tum;
+use std::path::PathBuf;
+
+fn csail_dir() -> Option<PathBuf> {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/datasets/mit-csail");
+    if dir.join("mit-csail.clf").is_file() && dir.join("mit-csail.relations").is_file() {
+        Some(dir)
+    } else {
+        eprintln!(
+            "SKIPPED: CSAIL dataset not found at {} (expected mit-csail.clf and mit-csail.relations)",
+            dir.display()
+        );
+        None
+    }
+}
+
+/// The first `n` scans of the CSAIL log and the relations inside them.
+fn csail_head(dir: &std::path::Path, n: usize) -> (Vec<ScanRecord>, Vec<Relation>) {
+    let records: Vec<ScanRecord> = open_log(&dir.join("mit-csail.clf"))
+        .unwrap()
+        .take(n)
+        .collect::<Result<_, _>>()
+        .unwrap();
+    let last = records.last().unwrap().scan.t;
+    let file = std::fs::File::open(dir.join("mit-csail.relations")).unwrap();
+    let relations = read_relations(std::io::BufReader::new(file))
+        .unwrap()
+        .into_iter()
+        .filter(|r| r.t1.max(r.t2) <= last + 1e-3)
+        .collect();
+    (records, relations)
+}
+
+fn show(name: &str, e: &RelationErrors) {
+    eprintln!(
+        "{name}: {} relations, {:.3} ± {:.3} m, {:.2} ± {:.2} deg",
+        e.used,
+        e.translation_m.mean,
+        e.translation_m.std_dev,
+        e.rotation_deg.mean,
+        e.rotation_deg.std_dev
+    );
+}
+
+/// The first 200 scans (42 s, in the cluttered start area): the lines must
+/// fix the heading that the logged odometry gets wrong by several degrees
+/// per relation, without losing translational accuracy.
+#[test]
+fn csail_first_200_scans_beat_odometry_on_the_relations() {
+    let Some(dir) = csail_dir() else { return };
+    let (records, relations) = csail_head(&dir, 200);
+    assert_eq!(records.len(), 200);
+    assert!(relations.len() >= 50, "{} relations", relations.len());
+
+    let odometry: Vec<(f64, Pose2)> = records
+        .iter()
+        .map(|r| (r.scan.t, r.odometry.unwrap()))
+        .collect();
+    let mut mapper = OfflineMapper::new(MapperConfig::default());
+    for r in &records {
+        mapper.process(r);
+    }
+    let by_odometry = evaluate(&odometry, &relations);
+    let by_mapper = evaluate(mapper.trajectory(), &relations);
+    show("odometry", &by_odometry);
+    show("mapper", &by_mapper);
+    eprintln!("{:#?}", mapper.summary());
+
+    const MAX_ROTATION_DEG: f64 = 2.5;
+    const MAX_TRANSLATION_M: f64 = 0.05;
+    // The rotation threshold is one the odometry fails: the test measures
+    // what the lines add.
+    assert!(
+        by_odometry.rotation_deg.mean > MAX_ROTATION_DEG,
+        "{by_odometry:?}"
+    );
+    assert_eq!(by_mapper.used, relations.len());
+    assert!(
+        by_mapper.rotation_deg.mean < MAX_ROTATION_DEG,
+        "{by_mapper:?}"
+    );
+    assert!(
+        by_mapper.translation_m.mean < MAX_TRANSLATION_M,
+        "{by_mapper:?}"
+    );
+    assert!(mapper.map().len() > 20);
+}
+
+/// The whole log (1988 scans, 374 m, 1172 relations) with the settings in
+/// `examples/csail.toml`: the relation error must beat the published
+/// figure for scan matching on this log (Kümmerle et al. 2009: 0.106 m).
+#[test]
+fn csail_whole_log_beats_published_scan_matching() {
+    let Some(dir) = csail_dir() else { return };
+    let settings = std::fs::read_to_string(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("examples/csail.toml"),
+    )
+    .unwrap();
+    let config = MapperConfig::from_toml(&settings).unwrap();
+    let (records, relations) = csail_head(&dir, usize::MAX);
+    assert_eq!((records.len(), relations.len()), (1988, 1172));
+    let mut mapper = OfflineMapper::new(config);
+    for r in &records {
+        mapper.process(r);
+    }
+    let e = evaluate(mapper.trajectory(), &relations);
+    show("whole log", &e);
+    eprintln!("{:#?}", mapper.summary());
+    assert_eq!(e.used, 1172);
+    assert!(e.translation_m.mean < 0.106, "{e:?}");
+    assert!(e.rotation_deg.mean < 1.0, "{e:?}");
+}
+
+/// Drives a simulated holonomic robot around the block of the loop world
+/// (36 m) with odometry that over-reads distance by 3 % and drifts 1° per
+/// metre; the mapper must stay far closer to the truth than the odometry,
+/// both step by step and around the whole loop.
+#[test]
+fn simulated_loop_with_biased_odometry() {
+    let world = World::loop_around_block();
+    let spec = ScanSpec::lms200_half_degree(0.01);
+    let mut rng = Rng::new(7);
+    // Waypoints on the corridor centre line; turn in place at corners.
+    let corners: [[f64; 2]; 5] = [[1.0, 1.0], [11.0, 1.0], [11.0, 9.0], [1.0, 9.0], [1.0, 1.0]];
+    let mut truth = vec![Pose2::new(1.0, 1.0, 0.0)];
+    for w in corners.windows(2) {
+        let heading = (w[1][1] - w[0][1]).atan2(w[1][0] - w[0][0]);
+        let mut p = *truth.last().unwrap();
+        while wrap_angle(heading - p.theta).abs() > 1e-9 {
+            let turn = wrap_angle(heading - p.theta).clamp(-0.15, 0.15);
+            p = Pose2::new(p.x, p.y, p.theta + turn);
+            truth.push(p);
+        }
+        let length = (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]);
+        let steps = (length / 0.1).round() as usize;
+        for k in 1..=steps {
+            let f = k as f64 / steps as f64;
+            truth.push(Pose2::new(
+                w[0][0] + f * (w[1][0] - w[0][0]),
+                w[0][1] + f * (w[1][1] - w[0][1]),
+                heading,
+            ));
+        }
+    }
+    // Odometry: the true increments, biased and noisy.
+    let mut odo = vec![Pose2::new(-3.0, 5.0, 1.0)];
+    for w in truth.windows(2) {
+        let d = w[0].between(&w[1]);
+        let dist = d.x.hypot(d.y);
+        let biased = Pose2::new(
+            1.03 * d.x + rng.normal(0.002),
+            1.03 * d.y + rng.normal(0.002),
+            d.theta + 0.0175 * dist + rng.normal(0.002),
+        );
+        odo.push(odo.last().unwrap().compose(&biased));
+    }
+    let mut mapper = OfflineMapper::new(MapperConfig::default());
+    for (k, (t, o)) in truth.iter().zip(&odo).enumerate() {
+        let time = 100.0 + 0.2 * k as f64;
+        let scan = cast_scan(&world, t, &spec, time, &mut rng);
+        mapper.process(&ScanRecord {
+            scan,
+            odometry: Some(*o),
+        });
+    }
+    let stamped = |poses: &[Pose2]| -> Vec<(f64, Pose2)> {
+        poses
+            .iter()
+            .enumerate()
+            .map(|(k, p)| (100.0 + 0.2 * k as f64, *p))
+            .collect()
+    };
+    let gt = stamped(&truth);
+    // Consecutive relations, plus loop relations from the start to every
+    // tenth pose of the last side.
+    let mut relations: Vec<Relation> = gt
+        .windows(2)
+        .map(|w| Relation {
+            t1: w[0].0,
+            t2: w[1].0,
+            delta: w[0].1.between(&w[1].1),
+        })
+        .collect();
+    let n = gt.len();
+    for k in (n - 60..n).step_by(10) {
+        relations.push(Relation {
+            t1: gt[0].0,
+            t2: gt[k].0,
+            delta: gt[0].1.between(&gt[k].1),
+        });
+    }
+    let by_odometry = evaluate(&stamped(&odo), &relations);
+    let by_mapper = evaluate(mapper.trajectory(), &relations);
+    show("sim odometry", &by_odometry);
+    show("sim mapper", &by_mapper);
+    eprintln!("{:#?}", mapper.summary());
+    assert_eq!(by_mapper.used, relations.len());
+    assert!(by_mapper.translation_m.mean < 0.2 * by_odometry.translation_m.mean);
+    assert!(by_mapper.translation_m.max < 0.05, "{by_mapper:?}");
+    assert!(by_mapper.rotation_deg.max < 1.0, "{by_mapper:?}");
+    // Closing the loop: the final pose agrees with the first one (the
+    // odometry alone ends metres away: 3 % of 36 m and 36° of heading).
+    let last = mapper.trajectory().last().unwrap().1;
+    let truth_last = truth[0].between(truth.last().unwrap());
+    assert!(
+        (last.x - truth_last.x).hypot(last.y - truth_last.y) < 0.1,
+        "{last:?}"
+    );
+    // Walls are not duplicated much: the world has 8 walls.
+    assert!(mapper.map().len() < 40, "{} segments", mapper.map().len());
+}
+
+/// The library entry point writes a readable trajectory (one pose per scan,
+/// the log's own times) and segment map, and reports progress.
+#[test]
+fn run_offline_mapping_writes_trajectory_and_segments() {
+    let Some(dir) = csail_dir() else { return };
+    let out = std::env::temp_dir().join(format!("clsmap-mapping-test-{}", std::process::id()));
+    // A 60-scan excerpt keeps the test quick.
+    let excerpt = out.join("excerpt.clf");
+    std::fs::create_dir_all(&out).unwrap();
+    let text = std::fs::read_to_string(dir.join("mit-csail.clf")).unwrap();
+    let head: Vec<&str> = text.lines().take(63).collect();
+    std::fs::write(&excerpt, head.join("\n")).unwrap();
+
+    let mut last = None;
+    let summary = run_offline_mapping(
+        &excerpt,
+        &out,
+        &MapperConfig::default(),
+        &mut |p: Progress| last = Some(p),
+    )
+    .unwrap();
+    let last = last.unwrap();
+    assert_eq!(summary.scans, 60);
+    assert_eq!(last.scans, 60);
+    assert_eq!(last.bytes_read, last.bytes_total);
+
+    let tum = read_tum(std::io::BufReader::new(
+        std::fs::File::open(out.join("trajectory.tum")).unwrap(),
+    ))
+    .unwrap();
+    let (records, _) = csail_head(&dir, 60);
+    assert_eq!(tum.len(), 60);
+    for ((t, _), r) in tum.iter().zip(&records) {
+        assert!((t - r.scan.t).abs() < 1e-6);
+    }
+    assert_eq!(tum[0].1, Pose2::IDENTITY);
+    let segments: SegmentMapFile =
+        serde_json::from_slice(&std::fs::read(out.join("segments.json")).unwrap()).unwrap();
+    assert_eq!(segments.segments.len(), summary.segments);
+    assert!(summary.segments > 10);
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+/// A malformed line stops the run with its line number and writes nothing.
+#[test]
+fn malformed_input_is_reported_with_its_line() {
+    let out = std::env::temp_dir().join(format!("clsmap-mapping-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&out).unwrap();
+    let input = out.join("bad.clf");
+    std::fs::write(
+        &input,
+        "# header\nFLASER 2 1.0 oops 0 0 0 0 0 0 1.0 host 1.0\n",
+    )
+    .unwrap();
+    let err = run_offline_mapping(
+        &input,
+        &out.join("result"),
+        &MapperConfig::default(),
+        &mut |_| {},
+    )
+    .unwrap_err();
+    let chain = format!("{err}: {}", std::error::Error::source(&err).unwrap());
+    assert!(chain.contains("line 2"), "{chain}");
+    assert!(!out.join("result").exists());
+    std::fs::remove_dir_all(&out).unwrap();
+}
