@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use anyhow::Context as _;
 use clsmap::eval::RelationErrors;
+use clsmap::map::cls::{self, ClsMap, ClsMapConfig, GridConfig};
 use clsmap::mapping_config::MapperConfig;
 use clsmap::pipeline::{self, Progress};
 use clsmap::trajectory::read_tum;
@@ -98,4 +99,45 @@ fn print_errors(e: &RelationErrors) {
         e.rotation_deg.std_dev,
         e.rotation_deg.max
     );
+}
+
+pub fn render(map: &Path, output: &Path, resolution: f64) -> anyhow::Result<ExitCode> {
+    let loaded = ClsMap::load(map, ClsMapConfig::default())
+        .with_context(|| format!("cannot load the map {}", map.display()))?;
+    let is_pgm = output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("pgm"));
+    if is_pgm {
+        let grid = cls::occupancy_grid(
+            &loaded,
+            &GridConfig {
+                resolution,
+                ..GridConfig::default()
+            },
+        )
+        .context("cannot rasterise the map")?;
+        let dir = match output.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        let stem = output
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .context("the output needs a UTF-8 file name")?;
+        grid.write(dir, stem)
+            .with_context(|| format!("cannot write {}", output.display()))?;
+        println!(
+            "wrote {} and {}.yaml ({} x {} cells of {resolution} m)",
+            output.display(),
+            dir.join(stem).display(),
+            grid.width,
+            grid.height
+        );
+    } else {
+        let svg = cls::picture(&loaded, None, None).to_svg();
+        std::fs::write(output, svg)
+            .with_context(|| format!("cannot write {}", output.display()))?;
+        println!("wrote {}", output.display());
+    }
+    Ok(ExitCode::SUCCESS)
 }

@@ -105,6 +105,18 @@ enum Command {
         #[arg(long)]
         relations: Option<PathBuf>,
     },
+    /// Draw a CLS map (map.json) as SVG, or export it as a ROS map_server
+    /// occupancy grid (PGM + YAML) when the output ends in `.pgm`.
+    Render {
+        /// Map written by `clsmap map` or the daemon (map.json).
+        map: PathBuf,
+        /// Output: FILE.svg, or FILE.pgm (FILE.yaml is written beside it).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Cell size of the occupancy grid (m).
+        #[arg(long, default_value_t = 0.05)]
+        resolution: f64,
+    },
     /// Score a TUM trajectory against a relations file (Kümmerle et al. 2009).
     Eval {
         /// Trajectory in TUM format (t x y z qx qy qz qw).
@@ -209,5 +221,10 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             trajectory,
             relations,
         } => mapping::eval(&trajectory, &relations),
+        Command::Render {
+            map,
+            output,
+            resolution,
+        } => mapping::render(&map, &output, resolution),
     }
 }

@@ -43,9 +43,11 @@ pub struct SegmentMapConfig {
     /// line bridging two pieces of one wall joins them but a doorway is
     /// not closed over. Default 0.1.
     pub merge_gap: f64,
-    /// Floor on a fused map line's σc (m). Default 0.005.
+    /// Floor on a fused map line's σc (m). Default 0.005: a wall keeps
+    /// learning from new views; measured on CSAIL, 2 mm (a rigid map) and
+    /// 1–2 cm (a map that follows every view) both gave larger errors.
     pub min_sigma_c: f64,
-    /// Floor on a fused map line's σθ (rad). Default 0.002.
+    /// Floor on a fused map line's σθ (rad). Default 0.002 (see σc).
     pub min_sigma_theta: f64,
 }
 
