@@ -1,6 +1,8 @@
 //! clsmap: a SICK LMS200 driver daemon and Closed Line Segment mapper
 //! (after Zhang & Ghosh, ICRA 2000) for holonomic robots.
 
+pub mod demo;
+pub mod durable;
 pub mod eval;
 pub mod geometry;
 pub mod input;

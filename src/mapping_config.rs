@@ -19,6 +19,7 @@
 
 use crate::geometry::{ExtractionConfig, Pose2};
 use crate::localize::LocalizerConfig;
+use crate::map::cls::ClsMapConfig;
 use crate::map::{KeyframeConfig, SegmentMapConfig};
 use serde::{Deserialize, Serialize};
 
@@ -139,6 +140,11 @@ pub struct MapperConfig {
     /// When the map offers too few matches, localize against the previous
     /// scan's lines instead (line scan matching). Default true.
     pub previous_scan_fallback: bool,
+    /// The Closed Line Segment map grown on keyframes. Its laser mounting
+    /// and range limits are taken from `laser_mount` and `[extraction]`
+    /// (whatever `[cls.local]` says about them), so the region and the
+    /// lines always come from the same beams.
+    pub cls: ClsMapConfig,
 }
 
 impl Default for MapperConfig {
@@ -154,6 +160,7 @@ impl Default for MapperConfig {
             odometry_time_offset: 0.0,
             update_map_when_unlocalized: false,
             previous_scan_fallback: true,
+            cls: ClsMapConfig::default(),
         }
     }
 }

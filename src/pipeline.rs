@@ -1,5 +1,6 @@
-//! The offline mapper: scans with odometry in, a trajectory and a map of
-//! actual segments out.
+//! The offline mapper: scans with odometry in, a trajectory, a map of
+//! actual segments (what localization matches against) and the Closed Line
+//! Segment map (the explored region, walls and frontiers) out.
 //!
 //! Per scan: the odometry increment since the previous scan predicts the
 //! pose (see [`MotionPredictor`] for frozen or missing odometry); lines are
@@ -21,13 +22,13 @@ use crate::eval::{EvalError, RelationErrors, evaluate_relations as evaluate_agai
 use crate::geometry::{CogLine, LineExtractor, Pose2, wrap_angle};
 use crate::input::{InputError, ScanRecord, open_log};
 use crate::localize::{LocalizationResult, LocalizeError, SegmentIndex, localize};
+use crate::map::cls::{ClsMap, picture};
 use crate::map::{KeyframePolicy, SegmentMap};
 use crate::mapping_config::MapperConfig;
 use crate::trajectory::{StampedPose, TrajectoryError, write_tum};
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
 use std::collections::BTreeMap;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use thiserror::Error;
@@ -41,6 +42,10 @@ use tracing::{debug, trace_span, warn};
 pub const TRAJECTORY_FILE: &str = "trajectory.tum";
 /// Name of the actual-segment map written by [`run_offline_mapping`].
 pub const SEGMENTS_FILE: &str = "segments.json";
+/// Name of the CLS map written by [`run_offline_mapping`].
+pub const MAP_FILE: &str = "map.json";
+/// Name of the map's picture written by [`run_offline_mapping`].
+pub const PICTURE_FILE: &str = "map.svg";
 
 #[derive(Debug, Error)]
 pub enum PipelineError {
@@ -58,6 +63,8 @@ pub enum PipelineError {
     Trajectory(#[from] TrajectoryError),
     #[error("cannot encode the segment map")]
     Json(#[from] serde_json::Error),
+    #[error("cannot save the CLS map")]
+    Store(#[from] crate::map::cls::StoreError),
 }
 
 /// What happened to one scan.
@@ -115,8 +122,10 @@ pub struct StageTimes {
     pub extract_us: f64,
     /// Localization, per scan that had a map to localize against.
     pub localize_us: f64,
-    /// Map update, per keyframe.
+    /// Segment map update, per keyframe.
     pub map_update_us: f64,
+    /// CLS map update (local map, region union, fusion), per keyframe.
+    pub cls_update_us: f64,
     /// Whole pipeline, per scan.
     pub per_scan_us: f64,
 }
@@ -128,12 +137,18 @@ pub struct MappingSummary {
     pub keyframes: usize,
     /// Segments in the final map.
     pub segments: usize,
+    /// Actual and virtual segments and loops of the final CLS map.
+    pub cls_actual: usize,
+    pub cls_virtual: usize,
+    pub cls_loops: usize,
     /// Scans whose lines left a direction unobservable (corridors).
     pub degenerate_scans: usize,
     /// Scans whose localization failed; the prediction was used.
     pub rejected_localizations: usize,
     /// The failures by kind (`TooFewMatches`, `ImplausibleJump`, ...).
     pub rejections_by_kind: BTreeMap<String, usize>,
+    /// Keyframes whose CLS map update was refused (the map kept as it was).
+    pub cls_rejected: usize,
     /// Scans that carried no odometry.
     pub scans_without_odometry: usize,
     /// Scans whose odometry equalled the previous scan's (standing still,
@@ -190,6 +205,7 @@ pub struct OfflineMapper {
     extractor: LineExtractor,
     lines: Vec<CogLine>,
     map: SegmentMap,
+    cls: ClsMap,
     keyframes: KeyframePolicy,
     odometry: OdometryFeed,
     predictor: MotionPredictor,
@@ -198,7 +214,7 @@ pub struct OfflineMapper {
     previous_scan: SegmentIndex,
     trajectory: Vec<StampedPose>,
     summary: MappingSummary,
-    clocks: [StageClock; 5],
+    clocks: [StageClock; 6],
 }
 
 const PREDICT: usize = 0;
@@ -206,6 +222,7 @@ const EXTRACT: usize = 1;
 const LOCALIZE: usize = 2;
 const MAP_UPDATE: usize = 3;
 const WHOLE: usize = 4;
+const CLS_UPDATE: usize = 5;
 
 impl OfflineMapper {
     pub fn new(config: MapperConfig) -> Self {
@@ -214,13 +231,14 @@ impl OfflineMapper {
             extractor: LineExtractor::new(),
             lines: Vec::new(),
             map: SegmentMap::new(config.map),
+            cls: ClsMap::new(cls_config(&config)),
             keyframes: KeyframePolicy::new(config.keyframes),
             odometry: OdometryFeed::new(config.odometry_time_offset),
             predictor: MotionPredictor::default(),
             previous_scan: SegmentIndex::new(),
             trajectory: Vec::new(),
             summary: MappingSummary::default(),
-            clocks: [StageClock::default(); 5],
+            clocks: [StageClock::default(); 6],
         }
     }
 
@@ -232,6 +250,11 @@ impl OfflineMapper {
         &self.map
     }
 
+    /// The Closed Line Segment map grown so far.
+    pub fn cls_map(&self) -> &ClsMap {
+        &self.cls
+    }
+
     /// One pose per scan processed so far (s, map frame).
     pub fn trajectory(&self) -> &[StampedPose] {
         &self.trajectory
@@ -241,11 +264,15 @@ impl OfflineMapper {
     pub fn summary(&self) -> MappingSummary {
         let mut s = self.summary.clone();
         s.segments = self.map.len();
+        s.cls_actual = self.cls.actual_segments().count();
+        s.cls_virtual = self.cls.virtual_segments().count();
+        s.cls_loops = self.cls.loops().count();
         s.mean_time = StageTimes {
             predict_us: self.clocks[PREDICT].mean_us(),
             extract_us: self.clocks[EXTRACT].mean_us(),
             localize_us: self.clocks[LOCALIZE].mean_us(),
             map_update_us: self.clocks[MAP_UPDATE].mean_us(),
+            cls_update_us: self.clocks[CLS_UPDATE].mean_us(),
             per_scan_us: self.clocks[WHOLE].mean_us(),
         };
         s
@@ -382,6 +409,17 @@ impl OfflineMapper {
             trace_span!("map_update")
                 .in_scope(|| self.map.update(&self.lines, &outcome.pose, &cov));
             self.clocks[MAP_UPDATE].add(t.elapsed());
+            let t = Instant::now();
+            let grown = trace_span!("cls_update").in_scope(|| {
+                self.cls
+                    .update(&self.lines, &record.scan, outcome.pose, cov)
+            });
+            self.clocks[CLS_UPDATE].add(t.elapsed());
+            if let Err(e) = grown {
+                // The CLS map refuses an update whole and stays valid.
+                self.summary.cls_rejected += 1;
+                debug!(t = record.scan.t, "CLS map update refused: {e}");
+            }
             outcome.keyframe = true;
             self.summary.keyframes += 1;
         }
@@ -410,21 +448,41 @@ pub struct Progress {
     pub bytes_total: u64,
 }
 
-/// Writes `bytes` to `path` atomically: a temporary file beside it,
-/// flushed to disk, then renamed over the target.
-fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), PipelineError> {
-    let output_error = |source| PipelineError::Output {
+/// The CLS map configuration the mapper uses: the configured one, with
+/// the laser mounting and range limits of the line extraction.
+fn cls_config(config: &MapperConfig) -> crate::map::cls::ClsMapConfig {
+    let mut cls = config.cls;
+    cls.local.mount = config.laser_mount;
+    cls.local.min_range = config.extraction.min_range;
+    cls.local.max_range = config.extraction.max_range;
+    cls
+}
+
+fn write_file(path: &Path, bytes: &[u8]) -> Result<(), PipelineError> {
+    crate::durable::write_atomically(path, bytes).map_err(|source| PipelineError::Output {
         path: path.to_owned(),
         source,
-    };
-    let mut tmp_name = path.as_os_str().to_owned();
-    tmp_name.push(".tmp");
-    let tmp = PathBuf::from(tmp_name);
-    let mut file = std::fs::File::create(&tmp).map_err(output_error)?;
-    file.write_all(bytes).map_err(output_error)?;
-    file.sync_all().map_err(output_error)?;
-    drop(file);
-    std::fs::rename(&tmp, path).map_err(output_error)
+    })
+}
+
+/// Writes what a mapper built into `out_dir` (created if needed), each
+/// file atomically: the trajectory ([`TRAJECTORY_FILE`]), the segment map
+/// ([`SEGMENTS_FILE`]), the CLS map ([`MAP_FILE`]) and its picture with the
+/// trajectory ([`PICTURE_FILE`]).
+pub fn write_outputs(out_dir: &Path, mapper: &OfflineMapper) -> Result<(), PipelineError> {
+    std::fs::create_dir_all(out_dir).map_err(|source| PipelineError::Output {
+        path: out_dir.to_owned(),
+        source,
+    })?;
+    let mut tum = Vec::new();
+    write_tum(&mut tum, mapper.trajectory())?;
+    write_file(&out_dir.join(TRAJECTORY_FILE), &tum)?;
+    let json = serde_json::to_vec_pretty(&mapper.map().snapshot())?;
+    write_file(&out_dir.join(SEGMENTS_FILE), &json)?;
+    mapper.cls_map().save(&out_dir.join(MAP_FILE))?;
+    let poses: Vec<Pose2> = mapper.trajectory().iter().map(|(_, p)| *p).collect();
+    let pic = picture(mapper.cls_map(), Some(&poses), poses.last().copied());
+    write_file(&out_dir.join(PICTURE_FILE), pic.to_svg().as_bytes())
 }
 
 /// Maps a log file offline and writes `trajectory.tum` and `segments.json`
@@ -458,15 +516,7 @@ pub fn run_offline_mapping(
             "localization failed on some scans; their odometry prediction was used"
         );
     }
-    std::fs::create_dir_all(out_dir).map_err(|source| PipelineError::Output {
-        path: out_dir.to_owned(),
-        source,
-    })?;
-    let mut tum = Vec::new();
-    write_tum(&mut tum, mapper.trajectory())?;
-    write_atomically(&out_dir.join(TRAJECTORY_FILE), &tum)?;
-    let json = serde_json::to_vec_pretty(&mapper.map().snapshot())?;
-    write_atomically(&out_dir.join(SEGMENTS_FILE), &json)?;
+    write_outputs(out_dir, &mapper)?;
     Ok(summary)
 }
 

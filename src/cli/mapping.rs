@@ -54,6 +54,10 @@ pub fn map(
     );
     println!("  segments in the map:        {}", summary.segments);
     println!(
+        "  CLS map:                    {} actual + {} virtual segments in {} loops ({} updates refused)",
+        summary.cls_actual, summary.cls_virtual, summary.cls_loops, summary.cls_rejected
+    );
+    println!(
         "  degenerate scans:           {} (a direction left to odometry)",
         summary.degenerate_scans
     );
@@ -62,8 +66,8 @@ pub fn map(
         summary.rejected_localizations, summary.rejections_by_kind
     );
     println!(
-        "  mean time per scan:         {:.1} µs (extraction {:.1}, localization {:.1}, map update {:.1} per keyframe)",
-        t.per_scan_us, t.extract_us, t.localize_us, t.map_update_us
+        "  mean time per scan:         {:.1} µs (extraction {:.1}, localization {:.1}; per keyframe: segment map {:.1}, CLS map {:.1})",
+        t.per_scan_us, t.extract_us, t.localize_us, t.map_update_us, t.cls_update_us
     );
     println!("  wrote {}", out.display());
     if let Some(relations) = relations {

@@ -9,6 +9,7 @@ use std::sync::atomic::AtomicBool;
 use anyhow::Context as _;
 use clap::{Parser, Subcommand, ValueEnum};
 
+mod demo;
 mod mapping;
 mod sensor;
 
@@ -28,6 +29,21 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// The embedded default: an emulated LMS200 on a pseudo-terminal and a
+    /// simulated holonomic base in a built-in floor plan, mapped live
+    /// through the real serial driver; writes the map, its picture and the
+    /// trajectory.
+    Demo {
+        /// Where to write map.json, map.svg, trajectory.tum, demo.json.
+        #[arg(long, default_value = "out/demo")]
+        out: PathBuf,
+        /// Seed of the simulated range noise and odometry errors.
+        #[arg(long, default_value_t = 7)]
+        seed: u64,
+        /// Driving speed of the simulated base (m/s).
+        #[arg(long, default_value_t = 1.0)]
+        speed: f64,
+    },
     /// Find an LMS200 on a serial port: line speed, type, firmware, variant, units.
     Probe {
         /// Serial device, e.g. /dev/ttyUSB0.
@@ -179,6 +195,7 @@ fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
 
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
+        Command::Demo { out, seed, speed } => demo::demo(&out, seed, speed),
         Command::Probe { port } => sensor::probe(&port),
         Command::Record {
             port,

@@ -3,7 +3,7 @@
 //!
 //! Every reader yields [`ScanRecord`]s through the [`LogSource`] iterator
 //! interface, so the mapping pipeline does not care whether scans come from
-//! a CARMEN log or (later) an LMS200 telegram recording.
+//! a CARMEN log or an LMS200 telegram recording.
 
 pub mod carmen;
 pub mod lms200;
@@ -15,7 +15,7 @@ pub use odometry::{OdometryError, OdometrySample, OdometryTrack};
 use crate::geometry::{Pose2, RangeScan};
 use std::cell::Cell;
 use std::fs::File;
-use std::io::{BufReader, Read};
+use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
 use thiserror::Error;
@@ -90,23 +90,33 @@ impl<R: Read> Read for CountingReader<R> {
 }
 
 impl LogFile {
-    /// Opens a log for streaming. Only CARMEN text logs exist so far; the
-    /// telegram recording reader will be dispatched from here once its
-    /// format is fixed.
+    /// Opens a log for streaming: an LMS200 recording (by its signature) or
+    /// a CARMEN text log.
     pub fn open(path: &Path) -> Result<LogFile, InputError> {
         let open_error = |source| InputError::Open {
             path: path.to_owned(),
             source,
         };
-        let file = File::open(path).map_err(open_error)?;
+        let mut file = File::open(path).map_err(open_error)?;
         let size = file.metadata().map_err(open_error)?.len();
+        // A recording starts with its signature; anything else is read as
+        // a CARMEN text log, which names the first line it cannot parse.
+        let mut head = [0u8; 7];
+        let is_recording =
+            file.read_exact(&mut head).is_ok() && head[..] == ::lms200::recording::MAGIC[..7];
+        file.seek(SeekFrom::Start(0)).map_err(open_error)?;
         let bytes_read = Rc::new(Cell::new(0));
-        let reader = CountingReader {
+        let reader = BufReader::new(CountingReader {
             inner: file,
             count: Rc::clone(&bytes_read),
+        });
+        let scans: Box<dyn LogSource> = if is_recording {
+            Box::new(lms200::RecordingScans::new(reader)?)
+        } else {
+            Box::new(CarmenScans::new(reader))
         };
         Ok(LogFile {
-            scans: Box::new(CarmenScans::new(BufReader::new(reader))),
+            scans,
             bytes_read,
             size,
         })

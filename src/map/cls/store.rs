@@ -17,8 +17,7 @@
 //! fsync, rename, fsync of the directory, so a crash leaves either the old
 //! map or the new one.
 
-use std::fs::{self, File};
-use std::io::Write;
+use std::fs;
 use std::path::{Path, PathBuf};
 
 use crc::{CRC_32_ISO_HDLC, Crc};
@@ -195,29 +194,7 @@ fn raw_member<'a>(text: &'a str, key: &str) -> Option<&'a str> {
 /// Writes `items` to `path` atomically.
 pub fn save_items(path: &Path, items: &[ClsmItem]) -> Result<(), StoreError> {
     let text = encode(items).map_err(StoreError::Parse)?;
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let name = path
-        .file_name()
-        .map_or_else(|| "map.json".into(), |n| n.to_string_lossy().into_owned());
-    let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
-    let write = || -> std::io::Result<()> {
-        let mut f = File::create(&tmp)?;
-        f.write_all(text.as_bytes())?;
-        f.sync_all()
-    };
-    if let Err(e) = write() {
-        // Best effort: the temporary file is useless now.
-        let _ = fs::remove_file(&tmp);
-        return Err(io_error(&tmp)(e));
-    }
-    fs::rename(&tmp, path).map_err(io_error(path))?;
-    // The rename is durable only once the directory entry is on disk.
-    File::open(&dir)
-        .and_then(|d| d.sync_all())
-        .map_err(io_error(&dir))
+    crate::durable::write_atomically(path, text.as_bytes()).map_err(io_error(path))
 }
 
 /// Reads and validates a map file; returns its shapes (not yet checked
