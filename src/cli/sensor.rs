@@ -8,7 +8,7 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, bail};
-use clsmap::input::lms200::{note_mode, scan_time};
+use clsmap::input::lms200::{note_mode, scan_time_us, seconds};
 use lms200::driver::SerialDriver;
 use lms200::emulator::{Emulator, EmulatorConfig, FaultConfig};
 use lms200::link::{Event, LinkConfig};
@@ -252,7 +252,7 @@ pub fn decode(
                     let mut scans = Vec::new();
                     decoder.feed(&bytes, |ev| collect_scan(ev, &mut scans));
                     for (scan, status) in scans {
-                        let t = scan_time(t_us as f64 * 1e-6, &scan, baud);
+                        let t = seconds(scan_time_us(t_us, &scan, baud));
                         emit(&scan, status, t, mode)?;
                     }
                 }

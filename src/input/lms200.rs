@@ -8,7 +8,8 @@ use std::io::Read;
 use lms200::link::{scan_frame_len, timing};
 use lms200::recording::{Record, RecordingError, RecordingReader};
 use lms200::{
-    Baud, DecodeEvent, Decoder, Measurement, MeasuringMode, Reply, Scan, SpecialCode, Variant,
+    Baud, DecodeEvent, Decoder, Measurement, MeasuringMode, Reply, Scan, SpecialCode, Units,
+    Variant,
 };
 
 use super::{InputError, ScanRecord};
@@ -30,7 +31,13 @@ pub fn scan_variant(scan: &Scan) -> Option<Variant> {
 /// SI units. `None` for partial scans, reserved units or reflectivity mode.
 pub fn range_scan(scan: &Scan, t: f64, mode: MeasuringMode) -> Option<RangeScan> {
     let variant = scan_variant(scan)?;
-    let metres = scan.units()?.metres_per_unit();
+    // Divide by the units per metre (exact) rather than multiply by the
+    // metres per unit (inexact), so 140 cm is 1.4 m to the last bit, as a
+    // text log's "1.40" reads.
+    let per_metre = match scan.units()? {
+        Units::Mm => 1000.0,
+        Units::Cm => 100.0,
+    };
     if !mode.is_distance() {
         return None;
     }
@@ -38,7 +45,7 @@ pub fn range_scan(scan: &Scan, t: f64, mode: MeasuringMode) -> Option<RangeScan>
         .values
         .iter()
         .map(|&v| match Measurement::from_value(v, mode) {
-            Measurement::Distance(d) => Ok(f64::from(d) * metres),
+            Measurement::Distance(d) => Ok(f64::from(d) / per_metre),
             Measurement::Special(SpecialCode::NotValid) => Err(BeamFault::NoReturn),
             Measurement::Special(SpecialCode::AboveMaximum) => Err(BeamFault::OutOfRange),
             Measurement::Special(_) | Measurement::Undefined(_) | Measurement::Reflectivity(_) => {
@@ -54,16 +61,24 @@ pub fn range_scan(scan: &Scan, t: f64, mode: MeasuringMode) -> Option<RangeScan>
     })
 }
 
-/// Mid-sweep time (s) of a complete scan whose telegram ended at `t_end`
-/// (s) on a line at `baud`: the model of [`lms200::link::timing`]. A
-/// partial scan keeps `t_end`.
-pub fn scan_time(t_end: f64, scan: &Scan, baud: Baud) -> f64 {
+/// Mid-sweep time (µs) of a complete scan whose telegram ended at `t_end_us`
+/// (µs) on a line at `baud`: the model of [`lms200::link::timing`]. A
+/// partial scan keeps `t_end_us`. Integer microseconds, like the
+/// recording's clock, so scan and odometry times convert to seconds the
+/// same way ([`seconds`]) and compare exactly.
+pub fn scan_time_us(t_end_us: i64, scan: &Scan, baud: Baud) -> i64 {
     let Some(variant) = scan_variant(scan) else {
-        return t_end;
+        return t_end_us;
     };
     let frame_len = scan_frame_len(variant, scan.indices.is_some());
     let back = timing::wire_time(frame_len, baud) + timing::mid_sweep_to_end(variant);
-    t_end - back.as_secs_f64()
+    t_end_us.saturating_sub(i64::try_from(back.as_micros()).unwrap_or(i64::MAX))
+}
+
+/// Microseconds (the recording's clock) as seconds: the f64 nearest to the
+/// exact value, as parsing the decimal number from a text log gives.
+pub fn seconds(t_us: i64) -> f64 {
+    t_us as f64 / 1e6
 }
 
 /// The measuring mode named in a recording's note (`mode=04`), which
@@ -128,13 +143,12 @@ impl<R: Read> RecordingScans<R> {
             }
             Some(Ok(record)) => match record {
                 Record::Rx { t_us, bytes } => {
-                    let t_end = t_us as f64 * 1e-6;
                     let (mode, baud) = (self.mode, self.baud);
                     let waiting = &mut self.waiting;
                     self.decoder.feed(&bytes, |event| {
                         if let DecodeEvent::Reply(frame) = event {
                             if let Reply::ScanData(scan) = frame.reply {
-                                let t = scan_time(t_end, &scan, baud);
+                                let t = seconds(scan_time_us(t_us, &scan, baud));
                                 if let Some(rs) = range_scan(&scan, t, mode) {
                                     waiting.push_back(rs);
                                 }
@@ -153,7 +167,7 @@ impl<R: Read> RecordingScans<R> {
                     }
                 }
                 Record::Odometry { t_us, x, y, theta } => {
-                    let t = t_us as f64 * 1e-6;
+                    let t = seconds(t_us);
                     if let Err(error) = self.odometry.push(t, Pose2::new(x, y, theta)) {
                         self.ended = true;
                         self.error = Some(InputError::RecordingOdometry {
@@ -192,7 +206,6 @@ impl<R: Read> Iterator for RecordingScans<R> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use lms200::Units;
     use lms200::recording::RecordingWriter;
 
     fn telegram(values: Vec<u16>, units: Units) -> Vec<u8> {
