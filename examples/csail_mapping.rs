@@ -3,13 +3,13 @@
 //!
 //! ```text
 //! cargo run --release --example csail_mapping -- [CONFIG.toml] [--scans N] [--out DIR] [--trace]
-//! cargo run --release --example csail_mapping -- examples/csail.toml
+//! cargo run --release --example csail_mapping -- config/csail.toml
 //! ```
 //! The log and relations are read from `../shared/datasets/mit-csail/`
 //! relative to the crate. `--trace` prints one line per scan: whether it
 //! was localized, degenerate, a keyframe, and its estimated step beside the
 //! odometry step (the basis of the odometry latency estimate in
-//! `examples/csail.toml`).
+//! `config/csail.toml`).
 
 use clsmap::eval::{RelationErrors, evaluate, read_relations};
 use clsmap::input::{ScanRecord, open_log};

@@ -19,7 +19,7 @@
 
 use crate::geometry::{ExtractionConfig, Pose2};
 use crate::localize::LocalizerConfig;
-use crate::map::cls::ClsMapConfig;
+use crate::map::cls::{ClsMapConfig, RegionConfig};
 use crate::map::{KeyframeConfig, SegmentMapConfig};
 use serde::{Deserialize, Serialize};
 
@@ -129,7 +129,7 @@ pub struct MapperConfig {
     /// holds the newest odometry). Default 0 (trust the log). Estimate it
     /// without ground truth by comparing the heading steps of localized
     /// scans with the odometry's at shifted times: on CSAIL they agree best
-    /// at −0.5 to −0.6 scan periods, about −0.1 s (see examples/csail.toml).
+    /// at −0.5 to −0.6 scan periods, about −0.1 s (see config/csail.toml).
     pub odometry_time_offset: f64,
     /// Whether a keyframe whose localization failed for a reason other
     /// than too few matches (an inconsistent, non-converged or implausible
@@ -140,11 +140,8 @@ pub struct MapperConfig {
     /// When the map offers too few matches, localize against the previous
     /// scan's lines instead (line scan matching). Default true.
     pub previous_scan_fallback: bool,
-    /// The Closed Line Segment map grown on keyframes. Its laser mounting
-    /// and range limits are taken from `laser_mount` and `[extraction]`
-    /// (whatever `[cls.local]` says about them), so the region and the
-    /// lines always come from the same beams.
-    pub cls: ClsMapConfig,
+    /// The Closed Line Segment map grown on keyframes.
+    pub cls: ClsTuning,
 }
 
 impl Default for MapperConfig {
@@ -160,12 +157,57 @@ impl Default for MapperConfig {
             odometry_time_offset: 0.0,
             update_map_when_unlocalized: false,
             previous_scan_fallback: true,
-            cls: ClsMapConfig::default(),
+            cls: ClsTuning::default(),
+        }
+    }
+}
+
+/// What is tunable in the CLS map. The rest of its configuration comes
+/// from the mapper's: the laser mounting (`laser_mount`), the range limits
+/// (`[extraction]`) and the fusion gates (`[map]`), so the region, the lines
+/// and both maps always agree on the beams and on what a wall is.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ClsTuning {
+    /// See [`LocalMapConfig::point_tolerance`](crate::map::cls::LocalMapConfig).
+    pub point_tolerance: f64,
+    /// See [`LocalMapConfig::max_wedge`](crate::map::cls::LocalMapConfig).
+    pub max_wedge: f64,
+    /// Snapping and sliver limits of the region union.
+    pub region: RegionConfig,
+    /// See [`ClsMapConfig::clip_to_window`].
+    pub clip_to_window: bool,
+}
+
+impl Default for ClsTuning {
+    fn default() -> Self {
+        let cls = ClsMapConfig::default();
+        ClsTuning {
+            point_tolerance: cls.local.point_tolerance,
+            max_wedge: cls.local.max_wedge,
+            region: cls.region,
+            clip_to_window: cls.clip_to_window,
         }
     }
 }
 
 impl MapperConfig {
+    /// The CLS map's full configuration, assembled from this one.
+    pub fn cls_map(&self) -> ClsMapConfig {
+        let mut cls = ClsMapConfig {
+            region: self.cls.region,
+            fusion: self.map,
+            clip_to_window: self.cls.clip_to_window,
+            ..ClsMapConfig::default()
+        };
+        cls.local.mount = self.laser_mount;
+        cls.local.min_range = self.extraction.min_range;
+        cls.local.max_range = self.extraction.max_range;
+        cls.local.point_tolerance = self.cls.point_tolerance;
+        cls.local.max_wedge = self.cls.max_wedge;
+        cls
+    }
+
     /// Parses a TOML document; errors carry line and column.
     pub fn from_toml(text: &str) -> Result<MapperConfig, toml::de::Error> {
         toml::from_str(text)
@@ -217,5 +259,37 @@ mod tests {
         assert!(walk[0][0] > still[0][0] && walk[2][2] > still[2][2]);
         let none = n.increment_covariance(None);
         assert_eq!(none[1][1], n.missing_translation.powi(2));
+    }
+}
+
+#[cfg(test)]
+mod documented_defaults {
+    use super::*;
+
+    /// `config/mapper.toml` lists every key with its default: it must
+    /// parse, and give exactly the defaults, so the two never drift apart.
+    #[test]
+    fn the_documented_config_is_the_default() {
+        let text = include_str!("../config/mapper.toml");
+        let parsed = MapperConfig::from_toml(text).unwrap();
+        assert_eq!(parsed, MapperConfig::default());
+        // And it names every key: serialise the defaults and look for each.
+        let defaults = toml::to_string(&MapperConfig::default()).unwrap();
+        for line in defaults.lines() {
+            if let Some((key, _)) = line.split_once(" = ") {
+                assert!(
+                    text.lines()
+                        .any(|l| l.trim_start().starts_with(&format!("{key} ="))),
+                    "config/mapper.toml does not document `{key}`"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn the_csail_config_parses() {
+        let text = include_str!("../config/csail.toml");
+        let cfg = MapperConfig::from_toml(text).unwrap();
+        assert!(cfg.odometry_time_offset < 0.0);
     }
 }

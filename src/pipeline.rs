@@ -231,7 +231,7 @@ impl OfflineMapper {
             extractor: LineExtractor::new(),
             lines: Vec::new(),
             map: SegmentMap::new(config.map),
-            cls: ClsMap::new(cls_config(&config)),
+            cls: ClsMap::new(config.cls_map()),
             keyframes: KeyframePolicy::new(config.keyframes),
             odometry: OdometryFeed::new(config.odometry_time_offset),
             predictor: MotionPredictor::default(),
@@ -446,16 +446,6 @@ pub struct Progress {
     pub bytes_read: u64,
     /// Size of the input (bytes).
     pub bytes_total: u64,
-}
-
-/// The CLS map configuration the mapper uses: the configured one, with
-/// the laser mounting and range limits of the line extraction.
-fn cls_config(config: &MapperConfig) -> crate::map::cls::ClsMapConfig {
-    let mut cls = config.cls;
-    cls.local.mount = config.laser_mount;
-    cls.local.min_range = config.extraction.min_range;
-    cls.local.max_range = config.extraction.max_range;
-    cls
 }
 
 fn write_file(path: &Path, bytes: &[u8]) -> Result<(), PipelineError> {

@@ -103,13 +103,13 @@ fn csail_first_200_scans_beat_odometry_on_the_relations() {
 }
 
 /// The whole log (1988 scans, 374 m, 1172 relations) with the settings in
-/// `examples/csail.toml`: the relation error must beat the published
+/// `config/csail.toml`: the relation error must beat the published
 /// figure for scan matching on this log (Kümmerle et al. 2009: 0.106 m).
 #[test]
 fn csail_whole_log_beats_published_scan_matching() {
     let Some(dir) = csail_dir() else { return };
     let settings = std::fs::read_to_string(
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("examples/csail.toml"),
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("config/csail.toml"),
     )
     .unwrap();
     let config = MapperConfig::from_toml(&settings).unwrap();

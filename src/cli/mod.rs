@@ -114,7 +114,7 @@ enum Command {
         /// Directory for trajectory.tum, segments.json and map.svg.
         #[arg(long)]
         out: PathBuf,
-        /// Mapper configuration (TOML); defaults documented in config/clsmap.toml.
+        /// Mapper configuration (TOML); every key and default is in config/mapper.toml.
         #[arg(long)]
         config: Option<PathBuf>,
         /// Score the trajectory against a relations file (Kümmerle et al. 2009).
