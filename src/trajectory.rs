@@ -30,6 +30,19 @@ pub fn write_tum<W: Write>(out: &mut W, poses: &[StampedPose]) -> Result<(), Tra
     Ok(())
 }
 
+/// Exactly `N` whitespace-separated finite numbers, or `None`: the line
+/// check shared by the TUM and relations readers, which both report any
+/// failure as one malformed-line error.
+pub(crate) fn finite_numbers<const N: usize>(text: &str) -> Option<[f64; N]> {
+    let values: Vec<f64> = text
+        .split_ascii_whitespace()
+        .map(str::parse::<f64>)
+        .collect::<Result<_, _>>()
+        .ok()?;
+    let values: [f64; N] = values.try_into().ok()?;
+    values.iter().all(|v| v.is_finite()).then_some(values)
+}
+
 /// Reads a TUM trajectory, projecting each pose onto the plane (yaw of the
 /// quaternion, z dropped). Comments (`#`) and blank lines are skipped.
 pub fn read_tum<R: BufRead>(input: R) -> Result<Vec<StampedPose>, TrajectoryError> {
@@ -45,17 +58,7 @@ pub fn read_tum<R: BufRead>(input: R) -> Result<Vec<StampedPose>, TrajectoryErro
             line: number,
             found: body.to_owned(),
         };
-        let values: Vec<f64> = body
-            .split_ascii_whitespace()
-            .map(str::parse::<f64>)
-            .collect::<Result<_, _>>()
-            .map_err(|_| malformed())?;
-        let &[t, x, y, _z, qx, qy, qz, qw] = values.as_slice() else {
-            return Err(malformed());
-        };
-        if !values.iter().all(|v| v.is_finite()) {
-            return Err(malformed());
-        }
+        let [t, x, y, _z, qx, qy, qz, qw] = finite_numbers(body).ok_or_else(malformed)?;
         let norm2 = qx * qx + qy * qy + qz * qz + qw * qw;
         if norm2 <= f64::EPSILON {
             return Err(TrajectoryError::ZeroQuaternion { line: number });

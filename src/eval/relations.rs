@@ -12,6 +12,7 @@
 //! Because only relative motions enter, the trajectory's frame is free.
 
 use crate::geometry::{Pose2, wrap_angle};
+use crate::trajectory::finite_numbers;
 use serde::Serialize;
 use std::io::BufRead;
 use std::path::Path;
@@ -114,17 +115,7 @@ pub fn read_relations<R: BufRead>(input: R) -> Result<Vec<Relation>, EvalError> 
             line: number,
             found: body.to_owned(),
         };
-        let values: Vec<f64> = body
-            .split_ascii_whitespace()
-            .map(str::parse::<f64>)
-            .collect::<Result<_, _>>()
-            .map_err(|_| malformed())?;
-        let &[t1, t2, x, y, _z, _roll, _pitch, yaw] = values.as_slice() else {
-            return Err(malformed());
-        };
-        if !values.iter().all(|v| v.is_finite()) {
-            return Err(malformed());
-        }
+        let [t1, t2, x, y, _z, _roll, _pitch, yaw] = finite_numbers(body).ok_or_else(malformed)?;
         out.push(Relation {
             t1,
             t2,

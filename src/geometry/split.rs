@@ -73,6 +73,19 @@ fn farthest_from_chord(points: &[ScanPoint], span: Span) -> (usize, f64) {
     best
 }
 
+/// Splits `s` at `k` (both halves keep it) onto `stack`, right half first
+/// so the left half is popped, and emitted, first: pieces stay in scan order.
+fn push_halves(stack: &mut Vec<Span>, s: Span, k: usize) {
+    stack.push(Span {
+        first: k,
+        last: s.last,
+    });
+    stack.push(Span {
+        first: s.first,
+        last: k,
+    });
+}
+
 /// Recursively splits `span` at the point farthest from its chord while
 /// that distance exceeds `threshold`; appends the pieces to `out` in scan
 /// order. Neighbouring pieces share their break point. `stack` is scratch
@@ -93,15 +106,7 @@ pub(crate) fn split_recursive(
         }
         let (k, d) = farthest_from_chord(points, s);
         if d > threshold {
-            // Right half first so the left half is popped (and emitted) first.
-            stack.push(Span {
-                first: k,
-                last: s.last,
-            });
-            stack.push(Span {
-                first: s.first,
-                last: k,
-            });
+            push_halves(stack, s, k);
         } else {
             out.push(s);
         }
@@ -146,16 +151,7 @@ pub(crate) fn split_by_fit(
                 .map(|k| s.first + k)
                 .filter(|&k| k + 1 >= s.first + min_points && s.last + 1 >= k + min_points);
             match split_at {
-                Some(k) => {
-                    stack.push(Span {
-                        first: k,
-                        last: s.last,
-                    });
-                    stack.push(Span {
-                        first: s.first,
-                        last: k,
-                    });
-                }
+                Some(k) => push_halves(stack, s, k),
                 None => out.push(s),
             }
         }

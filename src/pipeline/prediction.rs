@@ -277,11 +277,10 @@ mod tests {
         assert!(p[2].cov[0][0] > p[1].cov[0][0], "uncertainty grows");
     }
 
-    #[test]
-    fn an_untracked_freeze_keeps_the_lumped_jump_once() {
-        // Moving 0.1 m per scan; odometry frozen for three scans, then the
-        // whole motion at once. Localization fails during the freeze.
-        let odo = [
+    /// Moving 0.1 m per scan; odometry frozen for three scans, then the
+    /// whole motion at once.
+    fn freeze_odometry() -> [Option<Pose2>; 8] {
+        [
             x(0.0),
             x(0.1),
             x(0.2),
@@ -290,7 +289,13 @@ mod tests {
             x(0.2),
             x(0.6),
             x(0.7),
-        ];
+        ]
+    }
+
+    #[test]
+    fn an_untracked_freeze_keeps_the_lumped_jump_once() {
+        // Localization fails during the freeze.
+        let odo = freeze_odometry();
         let p = run(&odo, |k| !(3..=5).contains(&k), 0.0);
         // Constant velocity during the freeze...
         assert!((p[3].pose.x - 0.3).abs() < 1e-12 && !p[3].from_odometry);
@@ -303,16 +308,7 @@ mod tests {
 
     #[test]
     fn a_tracked_freeze_keeps_the_tracked_poses() {
-        let odo = [
-            x(0.0),
-            x(0.1),
-            x(0.2),
-            x(0.2),
-            x(0.2),
-            x(0.2),
-            x(0.6),
-            x(0.7),
-        ];
+        let odo = freeze_odometry();
         let p = run(&odo, |_| true, 0.0);
         // Constant velocity through the gap and on resumption (0.1 m per
         // scan), then odometry increments again from the re-anchor.

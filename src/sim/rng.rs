@@ -1,11 +1,15 @@
 //! A tiny seeded pseudo-random generator for simulations and tests:
-//! xorshift64* for uniform numbers, Box–Muller for Gaussian ones. Same
-//! seed, same sequence, on every platform.
+//! the driver's xorshift64* for uniform numbers, Box–Muller for Gaussian
+//! ones. Same seed, same sequence, on every platform.
+
+use lms200::emulator::XorShift64;
 
 /// Seeded generator (xorshift64*, Vigna 2016). Not for cryptography.
+///
+/// Wraps [`XorShift64`] so the workspace has one xorshift implementation.
 #[derive(Debug, Clone)]
 pub struct Rng {
-    state: u64,
+    bits: XorShift64,
     /// Second Box–Muller deviate, kept for the next call.
     spare_gaussian: Option<f64>,
 }
@@ -18,27 +22,21 @@ impl Rng {
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
         z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
         z ^= z >> 31;
-        // xorshift's state must never be zero.
-        let state = if z == 0 { 0x2545_F491_4F6C_DD1D } else { z };
         Rng {
-            state,
+            // `XorShift64::new` remaps a zero state itself.
+            bits: XorShift64::new(z),
             spare_gaussian: None,
         }
     }
 
     /// Next 64 uniformly distributed bits.
     pub fn next_u64(&mut self) -> u64 {
-        let mut x = self.state;
-        x ^= x >> 12;
-        x ^= x << 25;
-        x ^= x >> 27;
-        self.state = x;
-        x.wrapping_mul(0x2545_F491_4F6C_DD1D)
+        self.bits.next_u64()
     }
 
     /// Uniform in [0, 1), 53 bits of precision.
     pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+        self.bits.next_f64()
     }
 
     /// Uniform in [lo, hi).

@@ -275,12 +275,7 @@ impl Request {
 #[allow(clippy::unwrap_used)] // tests may unwrap: a panic is a failure
 mod tests {
     use super::*;
-
-    fn hex(text: &str) -> Vec<u8> {
-        text.split_whitespace()
-            .map(|pair| u8::from_str_radix(pair, 16).unwrap())
-            .collect()
-    }
+    use crate::test_util::hex;
 
     /// Every host vector of section 1.3, with the request that must encode to it.
     fn golden() -> Vec<(Request, Vec<u8>)> {

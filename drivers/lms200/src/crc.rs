@@ -130,13 +130,7 @@ pub fn crc16(bytes: &[u8]) -> u16 {
 #[allow(clippy::unwrap_used)] // tests may unwrap: a panic is a failure
 mod tests {
     use super::*;
-
-    /// Parses a space-separated hex string from the protocol notes.
-    fn hex(text: &str) -> Vec<u8> {
-        text.split_whitespace()
-            .map(|pair| u8::from_str_radix(pair, 16).unwrap())
-            .collect()
-    }
+    use crate::test_util::hex;
 
     /// Checks that the last two bytes of `frame` are the CRC (lo, hi) of the rest.
     fn assert_frame_crc(frame: &[u8]) {

@@ -99,6 +99,48 @@ fn validate_request(frame: &[u8], _shape: Option<&ScanShape>) -> Result<(u8, Req
     Ok((frame[1], request))
 }
 
+/// The stream methods both decoders share around their `framer`; only the
+/// event type and the reason to abandon a candidate differ. A macro rather
+/// than a generic keeps both public types and their docs exactly as they are.
+macro_rules! stream_methods {
+    ($event:ty, $(#[$abandon_doc:meta])*) => {
+        /// Pushes all of `bytes`, handing every event to `on_event`.
+        pub fn feed(&mut self, mut bytes: &[u8], mut on_event: impl FnMut($event)) {
+            loop {
+                let taken = self.push(bytes);
+                bytes = &bytes[taken..];
+                while let Some(event) = self.poll() {
+                    on_event(event);
+                }
+                if bytes.is_empty() {
+                    return;
+                }
+            }
+        }
+
+        $(#[$abandon_doc])*
+        pub fn abandon_incomplete(&mut self) {
+            self.framer.abandon_before = self.framer.end;
+        }
+
+        /// Discards all buffered bytes (e.g. after a line speed change); they
+        /// are counted as dropped.
+        pub fn clear(&mut self) {
+            self.framer.discard_buffered();
+        }
+
+        /// Bytes buffered and not yet turned into events.
+        pub fn buffered(&self) -> usize {
+            self.framer.buffered()
+        }
+
+        /// Counters since creation.
+        pub fn stats(&self) -> &DecoderStats {
+            &self.framer.stats
+        }
+    };
+}
+
 /// Decoder of the LMS → host byte stream.
 #[derive(Debug, Clone)]
 pub struct Decoder {
@@ -155,41 +197,11 @@ impl Decoder {
         })
     }
 
-    /// Pushes all of `bytes`, handing every event to `on_event`.
-    pub fn feed(&mut self, mut bytes: &[u8], mut on_event: impl FnMut(DecodeEvent)) {
-        loop {
-            let taken = self.push(bytes);
-            bytes = &bytes[taken..];
-            while let Some(event) = self.poll() {
-                on_event(event);
-            }
-            if bytes.is_empty() {
-                return;
-            }
-        }
-    }
-
-    /// Gives up on every incomplete candidate buffered now: call it when the
-    /// line has been silent longer than the LMS's 14 ms inter-byte gap. Each
-    /// one's STX is dropped as [`DropReason::Truncated`] by the next polls.
-    pub fn abandon_incomplete(&mut self) {
-        self.framer.abandon_before = self.framer.end;
-    }
-
-    /// Discards all buffered bytes (e.g. after a line speed change); they
-    /// are counted as dropped.
-    pub fn clear(&mut self) {
-        self.framer.discard_buffered();
-    }
-
-    /// Bytes buffered and not yet turned into events.
-    pub fn buffered(&self) -> usize {
-        self.framer.buffered()
-    }
-
-    /// Counters since creation.
-    pub fn stats(&self) -> &DecoderStats {
-        &self.framer.stats
+    stream_methods! {
+        DecodeEvent,
+        /// Gives up on every incomplete candidate buffered now: call it when the
+        /// line has been silent longer than the LMS's 14 ms inter-byte gap. Each
+        /// one's STX is dropped as [`DropReason::Truncated`] by the next polls.
     }
 }
 
@@ -234,40 +246,10 @@ impl RequestDecoder {
         })
     }
 
-    /// Pushes all of `bytes`, handing every event to `on_event`.
-    pub fn feed(&mut self, mut bytes: &[u8], mut on_event: impl FnMut(RequestEvent)) {
-        loop {
-            let taken = self.push(bytes);
-            bytes = &bytes[taken..];
-            while let Some(event) = self.poll() {
-                on_event(event);
-            }
-            if bytes.is_empty() {
-                return;
-            }
-        }
-    }
-
-    /// Gives up on every incomplete request buffered now: the LMS ignores a
-    /// request with more than 6 ms between its bytes.
-    pub fn abandon_incomplete(&mut self) {
-        self.framer.abandon_before = self.framer.end;
-    }
-
-    /// Discards all buffered bytes (e.g. after a line speed change); they
-    /// are counted as dropped.
-    pub fn clear(&mut self) {
-        self.framer.discard_buffered();
-    }
-
-    /// Bytes buffered and not yet turned into events.
-    pub fn buffered(&self) -> usize {
-        self.framer.buffered()
-    }
-
-    /// Counters since creation.
-    pub fn stats(&self) -> &DecoderStats {
-        &self.framer.stats
+    stream_methods! {
+        RequestEvent,
+        /// Gives up on every incomplete request buffered now: the LMS ignores a
+        /// request with more than 6 ms between its bytes.
     }
 }
 

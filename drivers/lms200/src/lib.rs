@@ -66,6 +66,9 @@ pub mod pty;
 pub mod recording;
 pub mod serial;
 
+#[cfg(test)]
+mod test_util;
+
 pub use command::{LMS_PASSWORD, PermanentBaud, Request};
 pub use config_block::{ConfigBlock, ConfigFormat};
 pub use crc::{Crc16, crc16};

@@ -354,12 +354,7 @@ impl Reply {
 #[allow(clippy::unwrap_used)] // tests may unwrap: a panic is a failure
 mod tests {
     use super::*;
-
-    fn hex(text: &str) -> Vec<u8> {
-        text.split_whitespace()
-            .map(|pair| u8::from_str_radix(pair, 16).unwrap())
-            .collect()
-    }
+    use crate::test_util::hex;
 
     /// The reply vectors of section 1.3 (rows 23–28) with their typed form.
     fn golden() -> Vec<(ReplyFrame, Vec<u8>)> {

@@ -434,15 +434,7 @@ impl ClsMap {
 mod tests {
     use super::*;
     use crate::map::cls::local::{LocalEdge, point_segment_distance};
-
-    fn polygon(pts: &[[f64; 2]]) -> ClsLoop {
-        let n = pts.len();
-        ClsLoop::new(
-            (0..n)
-                .map(|i| ClsSegment::virtual_between(pts[i], pts[(i + 1) % n]))
-                .collect(),
-        )
-    }
+    use crate::map::cls::loops::polygon;
 
     fn square(x0: f64, y0: f64, x1: f64, y1: f64, clockwise: bool) -> ClsLoop {
         let mut p = vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]];

@@ -394,19 +394,22 @@ fn overlap_beyond(v: [f64; 2], a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2
     (far_ab[0] - v[0]) * (far_cd[0] - v[0]) + (far_ab[1] - v[1]) * (far_cd[1] - v[1]) > 0.0
 }
 
+/// A closed loop of virtual segments through `pts`: the test fixture of
+/// this module and of `cls_map`.
+#[cfg(test)]
+pub(crate) fn polygon(pts: &[[f64; 2]]) -> ClsLoop {
+    let n = pts.len();
+    ClsLoop::new(
+        (0..n)
+            .map(|i| ClsSegment::virtual_between(pts[i], pts[(i + 1) % n]))
+            .collect(),
+    )
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-
-    fn polygon(pts: &[[f64; 2]]) -> ClsLoop {
-        let n = pts.len();
-        ClsLoop::new(
-            (0..n)
-                .map(|i| ClsSegment::virtual_between(pts[i], pts[(i + 1) % n]))
-                .collect(),
-        )
-    }
 
     fn square(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<[f64; 2]> {
         vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]

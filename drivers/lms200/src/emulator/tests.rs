@@ -6,13 +6,8 @@
 use std::time::{Duration, Instant};
 
 use super::*;
+use crate::test_util::hex;
 use crate::{DecodeEvent, Decoder, ModeChangeResult, PermanentBaud, Request, Status};
-
-fn hex(text: &str) -> Vec<u8> {
-    text.split_whitespace()
-        .map(|p| u8::from_str_radix(p, 16).unwrap())
-        .collect()
-}
 
 /// A sensor that has been on for a while, at `baud`, idle.
 fn running(baud: Baud) -> (Emulator, Instant) {
