@@ -4,6 +4,7 @@
 pub mod demo;
 pub mod durable;
 pub mod eval;
+pub mod explore;
 pub mod geometry;
 pub mod input;
 pub mod localize;

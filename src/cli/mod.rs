@@ -10,6 +10,7 @@ use anyhow::Context as _;
 use clap::{Parser, Subcommand, ValueEnum};
 
 mod demo;
+mod localize;
 mod mapping;
 mod sensor;
 
@@ -133,6 +134,28 @@ enum Command {
         #[arg(long, default_value_t = 0.05)]
         resolution: f64,
     },
+    /// Global localization: for each scan of a log, where in the map the
+    /// robot may be, as one JSON line of ranked hypotheses (map frame).
+    Localize {
+        /// CLS map written by `clsmap map` (map.json); its walls are used.
+        #[arg(long)]
+        map: PathBuf,
+        /// CARMEN log or clsmap recording with the scans.
+        #[arg(long)]
+        scan: PathBuf,
+        /// Carry the hypotheses from scan to scan with the log's odometry
+        /// and keep only those every scan agrees with (disambiguation);
+        /// scores are then summed over the scans tracked.
+        #[arg(long)]
+        track: bool,
+        /// Most hypotheses printed per scan.
+        #[arg(long, default_value_t = 5)]
+        max_hypotheses: usize,
+        /// Mapper configuration (TOML) for the laser mounting and line
+        /// extraction; see config/mapper.toml.
+        #[arg(long)]
+        config: Option<PathBuf>,
+    },
     /// Score a TUM trajectory against a relations file (Kümmerle et al. 2009).
     Eval {
         /// Trajectory in TUM format (t x y z qx qy qz qw).
@@ -238,6 +261,13 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             trajectory,
             relations,
         } => mapping::eval(&trajectory, &relations),
+        Command::Localize {
+            map,
+            scan,
+            track,
+            max_hypotheses,
+            config,
+        } => localize::localize(&map, &scan, config.as_deref(), track, max_hypotheses),
         Command::Render {
             map,
             output,

@@ -1,6 +1,7 @@
 //! Line correspondence and local localization against a line map.
 
 pub mod correspond;
+pub mod global;
 pub mod local;
 mod problem;
 mod solve;
