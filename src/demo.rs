@@ -302,7 +302,7 @@ pub fn run_demo(
     };
     let path = options.out_dir.join("demo.json");
     let text = serde_json::to_string_pretty(&summary).map_err(io::Error::from);
-    text.and_then(|t| std::fs::write(&path, t + "\n"))
+    text.and_then(|t| crate::durable::write_atomically(&path, (t + "\n").as_bytes()))
         .map_err(|source| DemoError::Io { path, source })?;
     Ok(summary)
 }

@@ -18,7 +18,7 @@
 //! ```
 
 use crate::geometry::{ExtractionConfig, Pose2};
-use crate::localize::LocalizerConfig;
+use crate::localize::{CorrespondenceConfig, LocalizerConfig};
 use crate::map::cls::{ClsMapConfig, RegionConfig};
 use crate::map::{KeyframeConfig, SegmentMapConfig};
 use serde::{Deserialize, Serialize};
@@ -208,10 +208,420 @@ impl MapperConfig {
         cls
     }
 
-    /// Parses a TOML document; errors carry line and column.
-    pub fn from_toml(text: &str) -> Result<MapperConfig, toml::de::Error> {
-        toml::from_str(text)
+    /// Parses a TOML document and checks every value's range; syntax and
+    /// unknown-key errors carry line and column, range errors the key.
+    pub fn from_toml(text: &str) -> Result<MapperConfig, ConfigError> {
+        let config: MapperConfig = toml::from_str(text)?;
+        config.validate()?;
+        Ok(config)
     }
+
+    /// Checks that every value is a number the mapper can work with: no
+    /// NaN, no infinity (but for `max_correction_sigmas`), no negative
+    /// lengths, no zero where the value divides or bounds a search.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        use std::f64::consts::{FRAC_PI_2, PI};
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+        let e = &self.extraction;
+        let l = &self.localizer;
+        let m = &self.map;
+        let o = &self.odometry;
+        let c = &self.cls;
+        let gates = |prefix: &'static str, g: &CorrespondenceConfig| {
+            [
+                (
+                    prefix,
+                    "max_angle_diff",
+                    g.max_angle_diff,
+                    g.max_angle_diff > 0.0 && g.max_angle_diff < FRAC_PI_2,
+                    "in (0, π/2)",
+                ),
+                (
+                    prefix,
+                    "max_centre_distance",
+                    g.max_centre_distance,
+                    positive(g.max_centre_distance),
+                    "> 0",
+                ),
+                (
+                    prefix,
+                    "extent_tolerance",
+                    g.extent_tolerance,
+                    non_negative(g.extent_tolerance),
+                    ">= 0",
+                ),
+            ]
+        };
+        let mut checks: Vec<(&'static str, &'static str, f64, bool, &'static str)> = vec![
+            (
+                "",
+                "max_correction_sigmas",
+                self.max_correction_sigmas,
+                self.max_correction_sigmas > 0.0,
+                "> 0 (inf = off)",
+            ),
+            (
+                "",
+                "odometry_time_offset",
+                self.odometry_time_offset,
+                self.odometry_time_offset.is_finite(),
+                "finite",
+            ),
+            (
+                "laser_mount",
+                "x",
+                self.laser_mount.x,
+                self.laser_mount.x.is_finite(),
+                "finite",
+            ),
+            (
+                "laser_mount",
+                "y",
+                self.laser_mount.y,
+                self.laser_mount.y.is_finite(),
+                "finite",
+            ),
+            (
+                "laser_mount",
+                "theta",
+                self.laser_mount.theta,
+                self.laser_mount.theta.is_finite(),
+                "finite",
+            ),
+            (
+                "extraction",
+                "split_threshold",
+                e.split_threshold,
+                positive(e.split_threshold),
+                "> 0",
+            ),
+            (
+                "extraction",
+                "merge_threshold",
+                e.merge_threshold,
+                positive(e.merge_threshold),
+                "> 0",
+            ),
+            (
+                "extraction",
+                "max_fit_chi2",
+                e.max_fit_chi2,
+                positive(e.max_fit_chi2),
+                "> 0",
+            ),
+            (
+                "extraction",
+                "min_points",
+                e.min_points as f64,
+                e.min_points >= 2,
+                ">= 2",
+            ),
+            (
+                "extraction",
+                "min_length",
+                e.min_length,
+                non_negative(e.min_length),
+                ">= 0",
+            ),
+            (
+                "extraction",
+                "max_point_gap",
+                e.max_point_gap,
+                positive(e.max_point_gap),
+                "> 0",
+            ),
+            (
+                "extraction",
+                "min_range",
+                e.min_range,
+                non_negative(e.min_range),
+                ">= 0",
+            ),
+            (
+                "extraction",
+                "max_range",
+                e.max_range,
+                positive(e.max_range) && e.max_range > e.min_range,
+                "> min_range",
+            ),
+            (
+                "extraction",
+                "end_trim_sigmas",
+                e.end_trim_sigmas,
+                non_negative(e.end_trim_sigmas),
+                ">= 0",
+            ),
+            (
+                "extraction",
+                "end_trim_floor",
+                e.end_trim_floor,
+                non_negative(e.end_trim_floor),
+                ">= 0",
+            ),
+            (
+                "extraction.range_noise",
+                "a",
+                e.range_noise.a,
+                non_negative(e.range_noise.a),
+                ">= 0",
+            ),
+            (
+                "extraction.range_noise",
+                "b",
+                e.range_noise.b,
+                non_negative(e.range_noise.b),
+                ">= 0",
+            ),
+            (
+                "localizer",
+                "gate_sigmas",
+                l.gate_sigmas,
+                non_negative(l.gate_sigmas),
+                ">= 0",
+            ),
+            (
+                "localizer",
+                "min_matches",
+                l.min_matches as f64,
+                l.min_matches >= 1,
+                ">= 1",
+            ),
+            (
+                "localizer",
+                "max_iterations",
+                l.max_iterations as f64,
+                l.max_iterations >= 1,
+                ">= 1",
+            ),
+            (
+                "localizer",
+                "converged_translation",
+                l.converged_translation,
+                positive(l.converged_translation),
+                "> 0",
+            ),
+            (
+                "localizer",
+                "converged_rotation",
+                l.converged_rotation,
+                positive(l.converged_rotation),
+                "> 0",
+            ),
+            (
+                "localizer",
+                "max_translation_jump",
+                l.max_translation_jump,
+                positive(l.max_translation_jump),
+                "> 0",
+            ),
+            (
+                "localizer",
+                "max_rotation_jump",
+                l.max_rotation_jump,
+                positive(l.max_rotation_jump),
+                "> 0",
+            ),
+            (
+                "localizer",
+                "min_sigma_c",
+                l.min_sigma_c,
+                positive(l.min_sigma_c),
+                "> 0",
+            ),
+            (
+                "localizer",
+                "min_sigma_theta",
+                l.min_sigma_theta,
+                positive(l.min_sigma_theta),
+                "> 0",
+            ),
+            (
+                "localizer",
+                "max_observable_sigma",
+                l.max_observable_sigma,
+                positive(l.max_observable_sigma),
+                "> 0",
+            ),
+            (
+                "localizer",
+                "validation_gate_sigmas",
+                l.validation_gate_sigmas,
+                non_negative(l.validation_gate_sigmas),
+                ">= 0",
+            ),
+            (
+                "localizer",
+                "robust_kernel_scale",
+                l.robust_kernel_scale,
+                non_negative(l.robust_kernel_scale),
+                ">= 0",
+            ),
+            (
+                "map",
+                "merge_gap",
+                m.merge_gap,
+                non_negative(m.merge_gap),
+                ">= 0",
+            ),
+            (
+                "map",
+                "min_sigma_c",
+                m.min_sigma_c,
+                positive(m.min_sigma_c),
+                "> 0",
+            ),
+            (
+                "map",
+                "min_sigma_theta",
+                m.min_sigma_theta,
+                positive(m.min_sigma_theta),
+                "> 0",
+            ),
+            (
+                "keyframes",
+                "min_travel",
+                self.keyframes.min_travel,
+                non_negative(self.keyframes.min_travel),
+                ">= 0",
+            ),
+            (
+                "keyframes",
+                "min_rotation",
+                self.keyframes.min_rotation,
+                non_negative(self.keyframes.min_rotation),
+                ">= 0",
+            ),
+            (
+                "odometry",
+                "translation_per_metre",
+                o.translation_per_metre,
+                non_negative(o.translation_per_metre),
+                ">= 0",
+            ),
+            (
+                "odometry",
+                "translation_per_radian",
+                o.translation_per_radian,
+                non_negative(o.translation_per_radian),
+                ">= 0",
+            ),
+            (
+                "odometry",
+                "rotation_per_radian",
+                o.rotation_per_radian,
+                non_negative(o.rotation_per_radian),
+                ">= 0",
+            ),
+            (
+                "odometry",
+                "rotation_per_metre",
+                o.rotation_per_metre,
+                non_negative(o.rotation_per_metre),
+                ">= 0",
+            ),
+            (
+                "odometry",
+                "min_translation",
+                o.min_translation,
+                positive(o.min_translation),
+                "> 0",
+            ),
+            (
+                "odometry",
+                "min_rotation",
+                o.min_rotation,
+                positive(o.min_rotation),
+                "> 0",
+            ),
+            (
+                "odometry",
+                "missing_translation",
+                o.missing_translation,
+                positive(o.missing_translation),
+                "> 0",
+            ),
+            (
+                "odometry",
+                "missing_rotation",
+                o.missing_rotation,
+                positive(o.missing_rotation),
+                "> 0",
+            ),
+            (
+                "cls",
+                "point_tolerance",
+                c.point_tolerance,
+                non_negative(c.point_tolerance),
+                ">= 0",
+            ),
+            (
+                "cls",
+                "max_wedge",
+                c.max_wedge,
+                c.max_wedge > 0.0 && c.max_wedge <= PI,
+                "in (0, π]",
+            ),
+            (
+                "cls.region",
+                "grid",
+                c.region.grid,
+                positive(c.region.grid),
+                "> 0",
+            ),
+            (
+                "cls.region",
+                "min_edge",
+                c.region.min_edge,
+                non_negative(c.region.min_edge),
+                ">= 0",
+            ),
+            (
+                "cls.region",
+                "min_loop_area",
+                c.region.min_loop_area,
+                non_negative(c.region.min_loop_area),
+                ">= 0",
+            ),
+            (
+                "cls.region",
+                "sliver_width",
+                c.region.sliver_width,
+                non_negative(c.region.sliver_width),
+                ">= 0",
+            ),
+        ];
+        checks.extend(gates("localizer.correspondence", &l.correspondence));
+        checks.extend(gates("map.fusion", &m.fusion));
+        match checks.into_iter().find(|check| !check.3) {
+            None => Ok(()),
+            Some((section, key, value, _, rule)) => Err(ConfigError::Range {
+                key: if section.is_empty() {
+                    key.to_string()
+                } else {
+                    format!("[{section}] {key}")
+                },
+                value,
+                rule,
+            }),
+        }
+    }
+}
+
+/// Why a mapper configuration was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// Not TOML, an unknown key or a value of the wrong type; the message
+    /// names the line and column.
+    #[error(transparent)]
+    Parse(#[from] toml::de::Error),
+    /// A value outside the range the mapper can work with.
+    #[error("{key} = {value}: must be {rule}")]
+    Range {
+        key: String,
+        value: f64,
+        rule: &'static str,
+    },
 }
 
 #[cfg(test)]
@@ -284,6 +694,30 @@ mod documented_defaults {
                 );
             }
         }
+    }
+
+    #[test]
+    fn out_of_range_values_are_refused_by_name() {
+        for (text, key) in [
+            (
+                "[extraction]\nmax_point_gap = 0.0\n",
+                "[extraction] max_point_gap",
+            ),
+            (
+                "[localizer]\ngate_sigmas = inf\n",
+                "[localizer] gate_sigmas",
+            ),
+            ("odometry_time_offset = nan\n", "odometry_time_offset"),
+            (
+                "[map.fusion]\nmax_angle_diff = 2.0\n",
+                "[map.fusion] max_angle_diff",
+            ),
+            ("[cls.region]\ngrid = -0.001\n", "[cls.region] grid"),
+        ] {
+            let err = MapperConfig::from_toml(text).unwrap_err().to_string();
+            assert!(err.starts_with(key), "{text:?}: {err}");
+        }
+        assert!(MapperConfig::from_toml("max_correction_sigmas = inf\n").is_ok());
     }
 
     #[test]

@@ -147,6 +147,8 @@ pub struct MappingSummary {
     pub rejected_localizations: usize,
     /// The failures by kind (`TooFewMatches`, `ImplausibleJump`, ...).
     pub rejections_by_kind: BTreeMap<String, usize>,
+    /// Where a recording broke off, when it did (the scans before were mapped).
+    pub input_broken: Option<String>,
     /// Keyframes whose CLS map update was refused (the map kept as it was).
     pub cls_rejected: usize,
     /// Scans that carried no odometry.
@@ -475,9 +477,11 @@ pub fn write_outputs(out_dir: &Path, mapper: &OfflineMapper) -> Result<(), Pipel
     write_file(&out_dir.join(PICTURE_FILE), pic.to_svg().as_bytes())
 }
 
-/// Maps a log file offline and writes `trajectory.tum` and `segments.json`
-/// into `out_dir` (created if needed). The first unreadable line ends the
-/// run with an error naming it; nothing is written then.
+/// Maps a log file offline and writes its outputs (see [`write_outputs`])
+/// into `out_dir` (created if needed). In a text log the first unreadable
+/// line ends the run with an error naming it, and nothing is written. A
+/// recording cut short (a killed recorder, a power loss) is mapped up to
+/// the break, as far as it is whole; the summary says where it broke.
 pub fn run_offline_mapping(
     input: &Path,
     out_dir: &Path,
@@ -486,8 +490,18 @@ pub fn run_offline_mapping(
 ) -> Result<MappingSummary, PipelineError> {
     let mut log = open_log(input)?;
     let mut mapper = OfflineMapper::new(*config);
+    let mut input_broken = None;
     while let Some(record) = log.next() {
-        mapper.process(&record?);
+        let record = match record {
+            Ok(r) => r,
+            Err(InputError::Recording(e)) => {
+                warn!("{e}: mapping the scans before the break");
+                input_broken = Some(e.to_string());
+                break;
+            }
+            Err(e) => return Err(e.into()),
+        };
+        mapper.process(&record);
         progress(Progress {
             scans: mapper.summary.scans,
             bytes_read: log.bytes_read(),
@@ -497,7 +511,8 @@ pub fn run_offline_mapping(
     if mapper.trajectory().is_empty() {
         return Err(PipelineError::NoScans);
     }
-    let summary = mapper.summary();
+    let mut summary = mapper.summary();
+    summary.input_broken = input_broken;
     if summary.rejected_localizations > 0 {
         warn!(
             rejected = summary.rejected_localizations,

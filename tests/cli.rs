@@ -705,6 +705,62 @@ fn probe_refuses_what_is_not_a_serial_port() {
 }
 
 #[test]
+fn record_never_costs_an_existing_file() {
+    let dir = TempDir::new("record-keep");
+    let keep = dir.join("keep.rec");
+    std::fs::write(&keep, b"the only copy").unwrap();
+    // A wrong port fails before the output is touched.
+    clsmap(&["record", "--port", "/nonexistent", "--out", arg(&keep)])
+        .failed()
+        .says("no such device");
+    assert_eq!(std::fs::read(&keep).unwrap(), b"the only copy");
+}
+
+#[test]
+fn render_refuses_to_draw_over_its_own_map() {
+    let dir = TempDir::new("render-self");
+    let out = dir.join("out");
+    map(&fixture(CSAIL_FIXTURE), &out, &[]).succeeded();
+    let map_json = out.join("map.json");
+    let before = std::fs::read(&map_json).unwrap();
+    clsmap(&["render", arg(&map_json), "-o", arg(&map_json)])
+        .failed()
+        .says("would overwrite the map");
+    assert_eq!(std::fs::read(&map_json).unwrap(), before);
+}
+
+#[test]
+fn a_recording_cut_short_is_mapped_up_to_the_break() {
+    let dir = TempDir::new("map-truncated");
+    let full = std::fs::read(fixture(CSAIL_FIXTURE)).unwrap();
+    let half = dir.join("half.rec");
+    std::fs::write(&half, &full[..full.len() / 2]).unwrap();
+    let out = dir.join("out");
+    let run = map(&half, &out, &[]).succeeded();
+    assert!(run.stdout.contains("input broke off"), "{run}");
+    let poses = read_tum(&out.join("trajectory.tum"));
+    assert!(
+        poses.len() > 50 && poses.len() < 200,
+        "{} poses from half the fixture",
+        poses.len()
+    );
+}
+
+#[test]
+fn an_out_of_range_configuration_value_is_named() {
+    let dir = TempDir::new("config-range");
+    let config = dir.join("bad.toml");
+    std::fs::write(&config, "[extraction]\nmax_point_gap = 0.0\n").unwrap();
+    map(
+        &fixture(CSAIL_FIXTURE),
+        &dir.join("out"),
+        &["--config", arg(&config)],
+    )
+    .failed()
+    .says("max_point_gap");
+}
+
+#[test]
 fn an_unknown_configuration_key_is_named_with_its_line() {
     let dir = TempDir::new("config");
     let config = dir.join("bad.toml");

@@ -76,8 +76,16 @@ pub fn localize(
     let mut out = std::io::BufWriter::new(stdout.lock());
     // The last result and the odometry at its scan, for tracking.
     let mut last: Option<(GlobalResult, Option<Pose2>)> = None;
+    let mut warned_no_odometry = false;
     for record in log {
         let record = record.with_context(|| format!("cannot read {}", input.display()))?;
+        if track && record.odometry.is_none() && !warned_no_odometry {
+            warned_no_odometry = true;
+            tracing::warn!(
+                "--track: {} has scans without odometry; those are localized on their own",
+                input.display()
+            );
+        }
         let lines = extract_lines(&record.scan, &mapper.laser_mount, &mapper.extraction);
         let result = match (&last, record.odometry) {
             (Some((previous, Some(before))), Some(now)) if track => {

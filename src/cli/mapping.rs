@@ -69,6 +69,9 @@ pub fn map(
         "  mean time per scan:         {:.1} µs (extraction {:.1}, localization {:.1}; per keyframe: segment map {:.1}, CLS map {:.1})",
         t.per_scan_us, t.extract_us, t.localize_us, t.map_update_us, t.cls_update_us
     );
+    if let Some(broken) = &summary.input_broken {
+        println!("  input broke off:            {broken} (the scans before it were mapped)");
+    }
     println!("  wrote {}", out.display());
     if let Some(relations) = relations {
         let trajectory_file = out.join(pipeline::TRAJECTORY_FILE);
@@ -106,6 +109,17 @@ fn print_errors(e: &RelationErrors) {
 }
 
 pub fn render(map: &Path, output: &Path, resolution: f64) -> anyhow::Result<ExitCode> {
+    let same_file = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    let yaml = output.with_extension("yaml");
+    if same_file(map, output) || same_file(map, &yaml) {
+        anyhow::bail!(
+            "{} would overwrite the map it is drawn from; choose another output",
+            output.display()
+        );
+    }
     let loaded = ClsMap::load(map, ClsMapConfig::default())
         .with_context(|| format!("cannot load the map {}", map.display()))?;
     let is_pgm = output
@@ -139,7 +153,7 @@ pub fn render(map: &Path, output: &Path, resolution: f64) -> anyhow::Result<Exit
         );
     } else {
         let svg = cls::picture(&loaded, None, None).to_svg();
-        std::fs::write(output, svg)
+        clsmap::durable::write_atomically(output, svg.as_bytes())
             .with_context(|| format!("cannot write {}", output.display()))?;
         println!("wrote {}", output.display());
     }

@@ -125,7 +125,7 @@ enum Command {
     /// Draw a CLS map (map.json) as SVG, or export it as a ROS map_server
     /// occupancy grid (PGM + YAML) when the output ends in `.pgm`.
     Render {
-        /// Map written by `clsmap map` or the daemon (map.json).
+        /// Map written by `clsmap map` or `clsmap demo` (map.json).
         map: PathBuf,
         /// Output: FILE.svg, or FILE.pgm (FILE.yaml is written beside it).
         #[arg(short, long)]

@@ -113,11 +113,21 @@ pub fn record(
         units_name(units),
         config.measuring_mode.code()
     );
-    let file = std::fs::File::create(out)
-        .with_context(|| format!("cannot create the recording {}", out.display()))?;
-    let mut driver = SerialDriver::open(port, config)
-        .with_context(|| format!("cannot open {}", port.display()))?
-        .with_recording(Box::new(BufWriter::new(file)), &note)?;
+    // The port first: a wrong --port must not cost an existing file.
+    let driver = SerialDriver::open(port, config)
+        .with_context(|| format!("cannot open {}", port.display()))?;
+    // Never overwrite a recording: it may be the only copy of a run.
+    let file = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(out)
+        .with_context(|| {
+            format!(
+                "cannot create the recording {} (an existing file is never overwritten)",
+                out.display()
+            )
+        })?;
+    let mut driver = driver.with_recording(Box::new(BufWriter::new(file)), &note)?;
     let stop = super::stop_flag()?;
     let mut count = 0u64;
     driver.run(

@@ -90,12 +90,17 @@ pub fn note_mode(text: &str) -> Option<MeasuringMode> {
         .and_then(MeasuringMode::from_code)
 }
 
+/// Scans held back waiting for a first odometry sample before they are
+/// given out without one: 10 s at the LMS200's fastest 75 scans/s.
+const MAX_SCANS_WITHOUT_ODOMETRY: usize = 750;
+
 /// A recording read as scans with odometry.
 ///
 /// A scan is held back until an odometry sample at or after its time has
 /// been read, so that its odometry is interpolated, not extrapolated; at
 /// the end of the file the last sample is used. A recording without any
-/// odometry yields scans with `odometry: None`. A broken recording yields
+/// odometry yields scans with `odometry: None` (after a bounded wait for a
+/// first sample). A broken recording yields
 /// every whole scan before the break, then the error.
 #[derive(Debug)]
 pub struct RecordingScans<R: Read> {
@@ -131,7 +136,12 @@ impl<R: Read> RecordingScans<R> {
     }
 
     fn ready(&self, t: f64) -> bool {
-        self.ended || self.odometry.last_time().is_some_and(|last| last >= t)
+        self.ended
+            || self.odometry.last_time().is_some_and(|last| last >= t)
+            // No odometry yet after this many scans: the recording has
+            // none (as `clsmap record` makes them); do not hold the whole
+            // file in memory waiting for it.
+            || (self.odometry.is_empty() && self.waiting.len() > MAX_SCANS_WITHOUT_ODOMETRY)
     }
 
     fn read_record(&mut self) {

@@ -1,7 +1,7 @@
 //! The blocking serial driver: a thin shell that runs the sans-IO [`Link`]
 //! on a [`SerialTransport`], optionally writing everything that crosses the
 //! line to a recording. Used by `clsmap probe` and `clsmap record`; the
-//! daemon runs the same link on an async port.
+//! same link runs on any other shell (an async port, say) unchanged.
 
 use std::io::Write;
 use std::ops::ControlFlow;

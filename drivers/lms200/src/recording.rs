@@ -2,7 +2,9 @@
 //! directions, baud changes, odometry samples and free-form notes.
 //!
 //! Replay feeds the `rx` chunks to the same [`crate::decoder::Decoder`] the
-//! live driver uses, so a recording decodes exactly as the line did.
+//! live driver uses, resynchronising the same way. (The live link also
+//! narrows the decoder to the configured scan shape; a replay that knows
+//! only the note's description decodes with the general checks.)
 //!
 //! # Format, version 1
 //!

@@ -13,9 +13,7 @@ use serialport::{ClearBuffer, SerialPort, TTYPort};
 pub enum SerialError {
     #[error("{path}: no such device (is the LMS200 adapter plugged in?)")]
     NotFound { path: PathBuf },
-    #[error(
-        "{path}: permission denied (add the user to the `dialout` group, or use the udev rule in systemd/)"
-    )]
+    #[error("{path}: permission denied (add the user to the `dialout` group)")]
     PermissionDenied { path: PathBuf },
     #[error("{path}: not a serial port (tty)")]
     NotATty { path: PathBuf },

@@ -7,7 +7,6 @@
 //! `(255 − v) / 255`: 0 (black) is occupied (> 0.65), 254 is free
 //! (< 0.196) and 205 lies between the thresholds, hence unknown.
 
-use std::fs;
 use std::path::{Path, PathBuf};
 
 use super::cls_map::ClsMap;
@@ -103,7 +102,8 @@ impl OccupancyGrid {
     pub fn write(&self, dir: &Path, stem: &str) -> Result<(), GridError> {
         let image = format!("{stem}.pgm");
         let write = |path: PathBuf, bytes: &[u8]| {
-            fs::write(&path, bytes).map_err(|source| GridError::Io { path, source })
+            crate::durable::write_atomically(&path, bytes)
+                .map_err(|source| GridError::Io { path, source })
         };
         write(dir.join(&image), &self.to_pgm())?;
         write(

@@ -67,7 +67,7 @@ pub struct MapFile {
 /// Why a map could not be stored or loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
-    #[error("{path}: {source}")]
+    #[error("{path}")]
     Io {
         path: PathBuf,
         source: std::io::Error,
