@@ -57,9 +57,9 @@ pub struct OccupancyGrid {
 pub enum GridError {
     #[error("resolution {0} m is not a positive finite number")]
     Resolution(f64),
-    #[error("the grid would have {0} cells, more than {MAX_CELLS}")]
-    TooLarge(usize),
-    #[error("{path}: {source}")]
+    #[error("the grid would have {0:.3e} cells, more than {MAX_CELLS}")]
+    TooLarge(f64),
+    #[error("{path}")]
     Io {
         path: PathBuf,
         source: std::io::Error,
@@ -137,12 +137,14 @@ pub fn occupancy_grid(map: &ClsMap, cfg: &GridConfig) -> Result<OccupancyGrid, G
         hi = [0.0, 0.0];
     }
     let origin = [lo[0] - margin, lo[1] - margin];
-    let width = (((hi[0] + margin - origin[0]) / res).ceil() as usize).max(1);
-    let height = (((hi[1] + margin - origin[1]) / res).ceil() as usize).max(1);
-    let cells = width
-        .checked_mul(height)
-        .filter(|&n| n <= MAX_CELLS)
-        .ok_or(GridError::TooLarge(width.saturating_mul(height)))?;
+    let cols = ((hi[0] + margin - origin[0]) / res).ceil().max(1.0);
+    let rows = ((hi[1] + margin - origin[1]) / res).ceil().max(1.0);
+    // Checked in f64 first: a cast of a huge count to usize saturates.
+    if cols * rows > MAX_CELLS as f64 {
+        return Err(GridError::TooLarge(cols * rows));
+    }
+    let (width, height) = (cols as usize, rows as usize);
+    let cells = width * height;
     let mut grid = OccupancyGrid {
         width,
         height,

@@ -258,6 +258,9 @@ pub fn decode(text: &str) -> Result<Vec<ClsShape>, StoreError> {
 
 /// Follows the `next` links into loops, then groups holes (clockwise)
 /// with the outer loop (counter-clockwise) that encloses them.
+/// A loop with its position in the file, for error messages.
+type IndexedLoop = (usize, ClsLoop);
+
 fn shapes_from_records(records: &[SegmentRecord]) -> Result<Vec<ClsShape>, StoreError> {
     let n = records.len();
     let mut seen = vec![false; n];
@@ -292,16 +295,30 @@ fn shapes_from_records(records: &[SegmentRecord]) -> Result<Vec<ClsShape>, Store
         }
         loops.push(ClsLoop::new(segments));
     }
-    let (outers, holes): (Vec<ClsLoop>, Vec<ClsLoop>) =
-        loops.into_iter().partition(|l| l.signed_area() > 0.0);
+    // A loop enclosing no area is neither an outline nor a hole.
+    if let Some((index, l)) = loops
+        .iter()
+        .enumerate()
+        .find(|(_, l)| l.signed_area().is_nan() || l.signed_area() == 0.0)
+    {
+        return Err(StoreError::Invariant(InvariantError::Orientation {
+            loop_index: index,
+            signed_area: l.signed_area(),
+            expected: "a loop must enclose some area",
+        }));
+    }
+    let (outers, holes): (Vec<IndexedLoop>, Vec<IndexedLoop>) = loops
+        .into_iter()
+        .enumerate()
+        .partition(|(_, l)| l.signed_area() > 0.0);
     let mut shapes: Vec<ClsShape> = outers
         .into_iter()
-        .map(|outer| ClsShape {
+        .map(|(_, outer)| ClsShape {
             outer,
             holes: vec![],
         })
         .collect();
-    for hole in holes {
+    for (index, hole) in holes {
         let probe = hole.segments().first().map(|s| s.point_on_left(1e-6));
         // The smallest outer loop around the hole is its shape.
         let owner = probe.and_then(|p| {
@@ -314,7 +331,7 @@ fn shapes_from_records(records: &[SegmentRecord]) -> Result<Vec<ClsShape>, Store
             Some(shape) => shape.holes.push(hole),
             None => {
                 return Err(StoreError::Invariant(InvariantError::Orientation {
-                    loop_index: 0,
+                    loop_index: index,
                     signed_area: hole.signed_area(),
                     expected: "a clockwise loop must lie inside a counter-clockwise one",
                 }));
@@ -397,6 +414,27 @@ mod tests {
         ));
         let nan = text.replacen("\"theta\":", "\"theta\":1e999,\"x\":", 1);
         assert!(decode(&nan).is_err());
+    }
+
+    #[test]
+    fn a_loop_enclosing_no_area_is_refused_by_its_index() {
+        let mut shapes = square_shape();
+        // A second shape whose outline goes out and back along one line.
+        let flat = ClsLoop::new(vec![
+            ClsSegment::virtual_between([5.0, 0.0], [6.0, 0.0]),
+            ClsSegment::virtual_between([6.0, 0.0], [5.0, 0.0]),
+        ]);
+        shapes.push(ClsShape {
+            outer: flat,
+            holes: vec![],
+        });
+        let text = encode(&items(&shapes)).unwrap();
+        match decode(&text) {
+            Err(StoreError::Invariant(InvariantError::Orientation { loop_index, .. })) => {
+                assert_eq!(loop_index, 2)
+            }
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]
