@@ -220,391 +220,196 @@ impl MapperConfig {
     /// NaN, no infinity (but for `max_correction_sigmas`), no negative
     /// lengths, no zero where the value divides or bounds a search.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        use std::f64::consts::{FRAC_PI_2, PI};
-        let positive = |v: f64| v.is_finite() && v > 0.0;
-        let non_negative = |v: f64| v.is_finite() && v >= 0.0;
-        let e = &self.extraction;
-        let l = &self.localizer;
-        let m = &self.map;
-        let o = &self.odometry;
-        let c = &self.cls;
-        let gates = |prefix: &'static str, g: &CorrespondenceConfig| {
-            [
-                (
-                    prefix,
-                    "max_angle_diff",
-                    g.max_angle_diff,
-                    g.max_angle_diff > 0.0 && g.max_angle_diff < FRAC_PI_2,
-                    "in (0, π/2)",
-                ),
-                (
-                    prefix,
-                    "max_centre_distance",
-                    g.max_centre_distance,
-                    positive(g.max_centre_distance),
-                    "> 0",
-                ),
-                (
-                    prefix,
-                    "extent_tolerance",
-                    g.extent_tolerance,
-                    non_negative(g.extent_tolerance),
-                    ">= 0",
-                ),
-            ]
-        };
-        let mut checks: Vec<(&'static str, &'static str, f64, bool, &'static str)> = vec![
-            (
+        use Rule::{AtLeast, Finite, NonNegative, Positive, Wedge};
+        let (e, l, m, o, c) = (
+            &self.extraction,
+            &self.localizer,
+            &self.map,
+            &self.odometry,
+            &self.cls,
+        );
+        let v = Validator;
+        // inf is allowed here (the gate off); NaN, zero and below are not.
+        if self.max_correction_sigmas.is_nan() || self.max_correction_sigmas <= 0.0 {
+            return Err(v.refuse(
                 "",
                 "max_correction_sigmas",
                 self.max_correction_sigmas,
-                self.max_correction_sigmas > 0.0,
                 "> 0 (inf = off)",
-            ),
-            (
-                "",
-                "odometry_time_offset",
-                self.odometry_time_offset,
-                self.odometry_time_offset.is_finite(),
-                "finite",
-            ),
-            (
-                "laser_mount",
-                "x",
-                self.laser_mount.x,
-                self.laser_mount.x.is_finite(),
-                "finite",
-            ),
-            (
-                "laser_mount",
-                "y",
-                self.laser_mount.y,
-                self.laser_mount.y.is_finite(),
-                "finite",
-            ),
-            (
-                "laser_mount",
-                "theta",
-                self.laser_mount.theta,
-                self.laser_mount.theta.is_finite(),
-                "finite",
-            ),
-            (
-                "extraction",
-                "split_threshold",
-                e.split_threshold,
-                positive(e.split_threshold),
-                "> 0",
-            ),
-            (
-                "extraction",
-                "merge_threshold",
-                e.merge_threshold,
-                positive(e.merge_threshold),
-                "> 0",
-            ),
-            (
-                "extraction",
-                "max_fit_chi2",
-                e.max_fit_chi2,
-                positive(e.max_fit_chi2),
-                "> 0",
-            ),
-            (
-                "extraction",
-                "min_points",
-                e.min_points as f64,
-                e.min_points >= 2,
-                ">= 2",
-            ),
-            (
-                "extraction",
-                "min_length",
-                e.min_length,
-                non_negative(e.min_length),
-                ">= 0",
-            ),
-            (
-                "extraction",
-                "max_point_gap",
-                e.max_point_gap,
-                positive(e.max_point_gap),
-                "> 0",
-            ),
-            (
-                "extraction",
-                "min_range",
-                e.min_range,
-                non_negative(e.min_range),
-                ">= 0",
-            ),
-            (
-                "extraction",
-                "max_range",
-                e.max_range,
-                positive(e.max_range) && e.max_range > e.min_range,
-                "> min_range",
-            ),
-            (
-                "extraction",
-                "end_trim_sigmas",
-                e.end_trim_sigmas,
-                non_negative(e.end_trim_sigmas),
-                ">= 0",
-            ),
-            (
-                "extraction",
-                "end_trim_floor",
-                e.end_trim_floor,
-                non_negative(e.end_trim_floor),
-                ">= 0",
-            ),
-            (
-                "extraction.range_noise",
-                "a",
-                e.range_noise.a,
-                non_negative(e.range_noise.a),
-                ">= 0",
-            ),
-            (
-                "extraction.range_noise",
-                "b",
-                e.range_noise.b,
-                non_negative(e.range_noise.b),
-                ">= 0",
-            ),
-            (
-                "localizer",
-                "gate_sigmas",
-                l.gate_sigmas,
-                non_negative(l.gate_sigmas),
-                ">= 0",
-            ),
-            (
-                "localizer",
-                "min_matches",
-                l.min_matches as f64,
-                l.min_matches >= 1,
-                ">= 1",
-            ),
-            (
-                "localizer",
-                "max_iterations",
-                l.max_iterations as f64,
-                l.max_iterations >= 1,
-                ">= 1",
-            ),
-            (
-                "localizer",
-                "converged_translation",
-                l.converged_translation,
-                positive(l.converged_translation),
-                "> 0",
-            ),
-            (
-                "localizer",
-                "converged_rotation",
-                l.converged_rotation,
-                positive(l.converged_rotation),
-                "> 0",
-            ),
-            (
-                "localizer",
-                "max_translation_jump",
-                l.max_translation_jump,
-                positive(l.max_translation_jump),
-                "> 0",
-            ),
-            (
-                "localizer",
-                "max_rotation_jump",
-                l.max_rotation_jump,
-                positive(l.max_rotation_jump),
-                "> 0",
-            ),
-            (
-                "localizer",
-                "min_sigma_c",
-                l.min_sigma_c,
-                positive(l.min_sigma_c),
-                "> 0",
-            ),
-            (
-                "localizer",
-                "min_sigma_theta",
-                l.min_sigma_theta,
-                positive(l.min_sigma_theta),
-                "> 0",
-            ),
-            (
-                "localizer",
-                "max_observable_sigma",
-                l.max_observable_sigma,
-                positive(l.max_observable_sigma),
-                "> 0",
-            ),
-            (
-                "localizer",
-                "validation_gate_sigmas",
-                l.validation_gate_sigmas,
-                non_negative(l.validation_gate_sigmas),
-                ">= 0",
-            ),
-            (
-                "localizer",
-                "robust_kernel_scale",
-                l.robust_kernel_scale,
-                non_negative(l.robust_kernel_scale),
-                ">= 0",
-            ),
-            (
-                "map",
-                "merge_gap",
-                m.merge_gap,
-                non_negative(m.merge_gap),
-                ">= 0",
-            ),
-            (
-                "map",
-                "min_sigma_c",
-                m.min_sigma_c,
-                positive(m.min_sigma_c),
-                "> 0",
-            ),
-            (
-                "map",
-                "min_sigma_theta",
-                m.min_sigma_theta,
-                positive(m.min_sigma_theta),
-                "> 0",
-            ),
-            (
-                "keyframes",
-                "min_travel",
-                self.keyframes.min_travel,
-                non_negative(self.keyframes.min_travel),
-                ">= 0",
-            ),
-            (
-                "keyframes",
-                "min_rotation",
-                self.keyframes.min_rotation,
-                non_negative(self.keyframes.min_rotation),
-                ">= 0",
-            ),
-            (
-                "odometry",
-                "translation_per_metre",
-                o.translation_per_metre,
-                non_negative(o.translation_per_metre),
-                ">= 0",
-            ),
-            (
-                "odometry",
-                "translation_per_radian",
-                o.translation_per_radian,
-                non_negative(o.translation_per_radian),
-                ">= 0",
-            ),
-            (
-                "odometry",
-                "rotation_per_radian",
-                o.rotation_per_radian,
-                non_negative(o.rotation_per_radian),
-                ">= 0",
-            ),
-            (
-                "odometry",
-                "rotation_per_metre",
-                o.rotation_per_metre,
-                non_negative(o.rotation_per_metre),
-                ">= 0",
-            ),
-            (
-                "odometry",
-                "min_translation",
-                o.min_translation,
-                positive(o.min_translation),
-                "> 0",
-            ),
-            (
-                "odometry",
-                "min_rotation",
-                o.min_rotation,
-                positive(o.min_rotation),
-                "> 0",
-            ),
-            (
-                "odometry",
-                "missing_translation",
-                o.missing_translation,
-                positive(o.missing_translation),
-                "> 0",
-            ),
-            (
-                "odometry",
-                "missing_rotation",
-                o.missing_rotation,
-                positive(o.missing_rotation),
-                "> 0",
-            ),
-            (
-                "cls",
-                "point_tolerance",
-                c.point_tolerance,
-                non_negative(c.point_tolerance),
-                ">= 0",
-            ),
-            (
-                "cls",
-                "max_wedge",
-                c.max_wedge,
-                c.max_wedge > 0.0 && c.max_wedge <= PI,
-                "in (0, π]",
-            ),
-            (
-                "cls.region",
-                "grid",
-                c.region.grid,
-                positive(c.region.grid),
-                "> 0",
-            ),
-            (
-                "cls.region",
-                "min_edge",
-                c.region.min_edge,
-                non_negative(c.region.min_edge),
-                ">= 0",
-            ),
-            (
-                "cls.region",
-                "min_loop_area",
-                c.region.min_loop_area,
-                non_negative(c.region.min_loop_area),
-                ">= 0",
-            ),
-            (
-                "cls.region",
-                "sliver_width",
-                c.region.sliver_width,
-                non_negative(c.region.sliver_width),
-                ">= 0",
-            ),
-        ];
-        checks.extend(gates("localizer.correspondence", &l.correspondence));
-        checks.extend(gates("map.fusion", &m.fusion));
-        match checks.into_iter().find(|check| !check.3) {
-            None => Ok(()),
-            Some((section, key, value, _, rule)) => Err(ConfigError::Range {
-                key: if section.is_empty() {
-                    key.to_string()
-                } else {
-                    format!("[{section}] {key}")
-                },
-                value,
-                rule,
-            }),
+            ));
         }
+        v.check(
+            "",
+            "odometry_time_offset",
+            self.odometry_time_offset,
+            Finite,
+        )?;
+        v.check("laser_mount", "x", self.laser_mount.x, Finite)?;
+        v.check("laser_mount", "y", self.laser_mount.y, Finite)?;
+        v.check("laser_mount", "theta", self.laser_mount.theta, Finite)?;
+        let x = "extraction";
+        v.check(x, "split_threshold", e.split_threshold, Positive)?;
+        v.check(x, "merge_threshold", e.merge_threshold, Positive)?;
+        v.check(x, "max_fit_chi2", e.max_fit_chi2, Positive)?;
+        v.check(x, "min_points", e.min_points as f64, AtLeast(2.0))?;
+        v.check(x, "min_length", e.min_length, NonNegative)?;
+        v.check(x, "max_point_gap", e.max_point_gap, Positive)?;
+        v.check(x, "min_range", e.min_range, NonNegative)?;
+        v.check(x, "max_range", e.max_range, AtLeast(e.min_range.max(0.0)))?;
+        v.check(x, "max_range", e.max_range, Positive)?;
+        v.check(x, "end_trim_sigmas", e.end_trim_sigmas, NonNegative)?;
+        v.check(x, "end_trim_floor", e.end_trim_floor, NonNegative)?;
+        v.check("extraction.range_noise", "a", e.range_noise.a, NonNegative)?;
+        v.check("extraction.range_noise", "b", e.range_noise.b, NonNegative)?;
+        let x = "localizer";
+        v.check(x, "gate_sigmas", l.gate_sigmas, NonNegative)?;
+        v.check(x, "min_matches", l.min_matches as f64, AtLeast(1.0))?;
+        v.check(x, "max_iterations", l.max_iterations as f64, AtLeast(1.0))?;
+        v.check(
+            x,
+            "converged_translation",
+            l.converged_translation,
+            Positive,
+        )?;
+        v.check(x, "converged_rotation", l.converged_rotation, Positive)?;
+        v.check(x, "max_translation_jump", l.max_translation_jump, Positive)?;
+        v.check(x, "max_rotation_jump", l.max_rotation_jump, Positive)?;
+        v.check(x, "min_sigma_c", l.min_sigma_c, Positive)?;
+        v.check(x, "min_sigma_theta", l.min_sigma_theta, Positive)?;
+        v.check(x, "max_observable_sigma", l.max_observable_sigma, Positive)?;
+        v.check(
+            x,
+            "validation_gate_sigmas",
+            l.validation_gate_sigmas,
+            NonNegative,
+        )?;
+        v.check(x, "robust_kernel_scale", l.robust_kernel_scale, NonNegative)?;
+        v.gates("localizer.correspondence", &l.correspondence)?;
+        v.check("map", "merge_gap", m.merge_gap, NonNegative)?;
+        v.check("map", "min_sigma_c", m.min_sigma_c, Positive)?;
+        v.check("map", "min_sigma_theta", m.min_sigma_theta, Positive)?;
+        v.gates("map.fusion", &m.fusion)?;
+        let k = &self.keyframes;
+        v.check("keyframes", "min_travel", k.min_travel, NonNegative)?;
+        v.check("keyframes", "min_rotation", k.min_rotation, NonNegative)?;
+        let x = "odometry";
+        v.check(
+            x,
+            "translation_per_metre",
+            o.translation_per_metre,
+            NonNegative,
+        )?;
+        v.check(
+            x,
+            "translation_per_radian",
+            o.translation_per_radian,
+            NonNegative,
+        )?;
+        v.check(x, "rotation_per_radian", o.rotation_per_radian, NonNegative)?;
+        v.check(x, "rotation_per_metre", o.rotation_per_metre, NonNegative)?;
+        v.check(x, "min_translation", o.min_translation, Positive)?;
+        v.check(x, "min_rotation", o.min_rotation, Positive)?;
+        v.check(x, "missing_translation", o.missing_translation, Positive)?;
+        v.check(x, "missing_rotation", o.missing_rotation, Positive)?;
+        v.check("cls", "point_tolerance", c.point_tolerance, NonNegative)?;
+        v.check("cls", "max_wedge", c.max_wedge, Wedge)?;
+        v.check("cls.region", "grid", c.region.grid, Positive)?;
+        v.check("cls.region", "min_edge", c.region.min_edge, NonNegative)?;
+        v.check(
+            "cls.region",
+            "min_loop_area",
+            c.region.min_loop_area,
+            NonNegative,
+        )?;
+        v.check(
+            "cls.region",
+            "sliver_width",
+            c.region.sliver_width,
+            NonNegative,
+        )?;
+        Ok(())
+    }
+}
+
+/// What a configuration value must be.
+#[derive(Debug, Clone, Copy)]
+enum Rule {
+    Finite,
+    Positive,
+    NonNegative,
+    /// Finite and at least this.
+    AtLeast(f64),
+    /// A correspondence angle gate: in (0, π/2), so opposite faces of a
+    /// wall never match.
+    Gate,
+    /// An envelope wedge: in (0, π].
+    Wedge,
+}
+
+impl Rule {
+    fn holds(self, v: f64) -> bool {
+        use std::f64::consts::{FRAC_PI_2, PI};
+        v.is_finite()
+            && match self {
+                Rule::Finite => true,
+                Rule::Positive => v > 0.0,
+                Rule::NonNegative => v >= 0.0,
+                Rule::AtLeast(min) => v >= min,
+                Rule::Gate => v > 0.0 && v < FRAC_PI_2,
+                Rule::Wedge => v > 0.0 && v <= PI,
+            }
+    }
+
+    fn text(self) -> String {
+        match self {
+            Rule::Finite => "finite".into(),
+            Rule::Positive => "> 0".into(),
+            Rule::NonNegative => ">= 0".into(),
+            Rule::AtLeast(min) => format!(">= {min}"),
+            Rule::Gate => "in (0, π/2)".into(),
+            Rule::Wedge => "in (0, π]".into(),
+        }
+    }
+}
+
+/// Checks values one by one and names the first that breaks its rule.
+struct Validator;
+
+impl Validator {
+    fn refuse(&self, section: &str, key: &str, value: f64, rule: impl Into<String>) -> ConfigError {
+        ConfigError::Range {
+            key: if section.is_empty() {
+                key.to_string()
+            } else {
+                format!("[{section}] {key}")
+            },
+            value,
+            rule: rule.into(),
+        }
+    }
+
+    fn check(&self, section: &str, key: &str, value: f64, rule: Rule) -> Result<(), ConfigError> {
+        if rule.holds(value) {
+            Ok(())
+        } else {
+            Err(self.refuse(section, key, value, rule.text()))
+        }
+    }
+
+    fn gates(&self, section: &str, g: &CorrespondenceConfig) -> Result<(), ConfigError> {
+        self.check(section, "max_angle_diff", g.max_angle_diff, Rule::Gate)?;
+        self.check(
+            section,
+            "max_centre_distance",
+            g.max_centre_distance,
+            Rule::Positive,
+        )?;
+        self.check(
+            section,
+            "extent_tolerance",
+            g.extent_tolerance,
+            Rule::NonNegative,
+        )
     }
 }
 
@@ -620,7 +425,7 @@ pub enum ConfigError {
     Range {
         key: String,
         value: f64,
-        rule: &'static str,
+        rule: String,
     },
 }
 

@@ -7,12 +7,15 @@
 
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use clsmap::geometry::{ExtractionConfig, Pose2, extract_lines, scan_points};
 use clsmap::map::cls::{
     ClsError, ClsMap, ClsMapConfig, GridConfig, LocalMapConfig, SegmentMode, StoreError,
     occupancy_grid, picture,
 };
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
+use common::{path, point_segment_distance};
 
 const COV: [[f64; 3]; 3] = [[1e-6, 0.0, 0.0], [0.0, 1e-6, 0.0], [0.0, 0.0, 1e-7]];
 
@@ -28,38 +31,6 @@ fn config() -> ClsMapConfig {
         },
         ..ClsMapConfig::default()
     }
-}
-
-/// Poses every `step` metres along the polyline through `waypoints`, each
-/// facing along its leg.
-fn path(waypoints: &[[f64; 2]], step: f64) -> Vec<Pose2> {
-    let mut out = Vec::new();
-    for w in waypoints.windows(2) {
-        let (a, b) = (w[0], w[1]);
-        let len = (b[0] - a[0]).hypot(b[1] - a[1]);
-        let heading = (b[1] - a[1]).atan2(b[0] - a[0]);
-        let n = (len / step).ceil() as usize;
-        for k in 0..n {
-            let t = k as f64 / n as f64;
-            out.push(Pose2::new(
-                a[0] + t * (b[0] - a[0]),
-                a[1] + t * (b[1] - a[1]),
-                heading,
-            ));
-        }
-    }
-    out
-}
-
-fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let e = [b[0] - a[0], b[1] - a[1]];
-    let len2 = e[0] * e[0] + e[1] * e[1];
-    let t = if len2 > 0.0 {
-        (((p[0] - a[0]) * e[0] + (p[1] - a[1]) * e[1]) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p[0] - a[0] - t * e[0]).hypot(p[1] - a[1] - t * e[1])
 }
 
 fn samples(a: [f64; 2], b: [f64; 2], step: f64) -> impl Iterator<Item = [f64; 2]> {

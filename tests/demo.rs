@@ -4,22 +4,13 @@
 
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use clsmap::demo::{DemoOptions, Scenario, run_demo};
 use clsmap::geometry::Pose2;
 use clsmap::map::cls::{ClsMap, ClsMapConfig};
 use clsmap::sim::{Tour, World};
-
-/// Distance from `p` to the segment `a`–`b` (m).
-fn distance_to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    let len2 = dx * dx + dy * dy;
-    let t = if len2 > 0.0 {
-        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
-}
+use common::point_segment_distance as distance_to_segment;
 
 #[test]
 fn a_short_tour_is_mapped_live_through_the_pty() {

@@ -11,6 +11,8 @@
 
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use clsmap::explore::pursuit::long_frontiers;
 use clsmap::explore::{
     ExplorationConfig, ExplorationMemory, FreeSpace, NextStep, PlanError, next_step, path_length,
@@ -19,6 +21,7 @@ use clsmap::explore::{
 use clsmap::geometry::{ExtractionConfig, Pose2, extract_lines};
 use clsmap::map::cls::{ClsLoop, ClsMap, ClsMapConfig, ClsSegment, ClsShape, SegmentMode, picture};
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
+use common::point_segment_distance;
 use proptest::prelude::*;
 
 const COV: [[f64; 3]; 3] = [[1e-6, 0.0, 0.0], [0.0, 1e-6, 0.0], [0.0, 0.0, 1e-7]];
@@ -26,17 +29,6 @@ const COV: [[f64; 3]; 3] = [[1e-6, 0.0, 0.0], [0.0, 1e-6, 0.0], [0.0, 0.0, 1e-7]
 const STEP: f64 = 0.3;
 /// Goals before the run counts as failed.
 const MAX_GOALS: usize = 80;
-
-fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let e = [b[0] - a[0], b[1] - a[1]];
-    let len2 = e[0] * e[0] + e[1] * e[1];
-    let t = if len2 > 0.0 {
-        (((p[0] - a[0]) * e[0] + (p[1] - a[1]) * e[1]) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p[0] - a[0] - t * e[0]).hypot(p[1] - a[1] - t * e[1])
-}
 
 fn wall_distance(world: &World, p: [f64; 2]) -> f64 {
     world

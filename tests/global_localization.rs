@@ -5,38 +5,20 @@
 
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use clsmap::geometry::{CogLine, ExtractionConfig, Pose2, extract_lines, wrap_angle};
 use clsmap::localize::global::{
     GlobalConfig, GlobalMap, GlobalResult, disambiguate, global_localize,
 };
 use clsmap::map::cls::{ClsMap, ClsMapConfig};
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
+use common::{path, point_segment_distance as distance_to_segment};
 
 /// Well-known pose covariance used while building the map (m², rad²).
 const COV: [[f64; 3]; 3] = [[1e-6, 0.0, 0.0], [0.0, 1e-6, 0.0], [0.0, 0.0, 1e-7]];
 /// Range noise of every scan (m).
 const SIGMA: f64 = 0.01;
-
-/// Poses every `step` metres along the polyline through `waypoints`, each
-/// facing along its leg, plus a turn on the spot at every corner.
-fn path(waypoints: &[[f64; 2]], step: f64) -> Vec<Pose2> {
-    let mut out = Vec::new();
-    for w in waypoints.windows(2) {
-        let (a, b) = (w[0], w[1]);
-        let len = (b[0] - a[0]).hypot(b[1] - a[1]);
-        let heading = (b[1] - a[1]).atan2(b[0] - a[0]);
-        let n = (len / step).ceil() as usize;
-        for k in 0..n {
-            let t = k as f64 / n as f64;
-            out.push(Pose2::new(
-                a[0] + t * (b[0] - a[0]),
-                a[1] + t * (b[1] - a[1]),
-                heading,
-            ));
-        }
-    }
-    out
-}
 
 /// The CLS map of `world` after scanning from `poses` (true poses, so the
 /// map frame is the world frame).
@@ -61,17 +43,6 @@ fn global_map(map: &ClsMap) -> GlobalMap {
 fn scan_lines(world: &World, pose: &Pose2, rng: &mut Rng) -> Vec<CogLine> {
     let scan = cast_scan(world, pose, &ScanSpec::lms200_half_degree(SIGMA), 0.0, rng);
     extract_lines(&scan, &Pose2::IDENTITY, &ExtractionConfig::default())
-}
-
-fn distance_to_segment(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let e = [b[0] - a[0], b[1] - a[1]];
-    let len2 = e[0] * e[0] + e[1] * e[1];
-    let t = if len2 > 0.0 {
-        (((p[0] - a[0]) * e[0] + (p[1] - a[1]) * e[1]) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p[0] - a[0] - t * e[0]).hypot(p[1] - a[1] - t * e[1])
 }
 
 /// A random pose in `[lo, hi]` inside the mapped region and at least

@@ -12,7 +12,6 @@ use clsmap::localize::global::{
     GlobalConfig, GlobalError, GlobalMap, GlobalResult, disambiguate, global_localize,
 };
 use clsmap::map::cls::{ClsMap, ClsMapConfig};
-use clsmap::mapping_config::MapperConfig;
 
 /// One output line: `{"t", "hypotheses": [{x, y, theta, score}], "ambiguous"}`,
 /// or `"error"` when the scan could not be localized.
@@ -49,15 +48,7 @@ pub fn localize(
     track: bool,
     max_hypotheses: usize,
 ) -> anyhow::Result<ExitCode> {
-    let mapper = match config {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("cannot read the configuration {}", path.display()))?;
-            MapperConfig::from_toml(&text)
-                .with_context(|| format!("invalid configuration {}", path.display()))?
-        }
-        None => MapperConfig::default(),
-    };
+    let mapper = super::mapping::mapper_config(config)?;
     let cls = ClsMap::load(map, ClsMapConfig::default())
         .with_context(|| format!("cannot load the map {}", map.display()))?;
     let global_map = GlobalMap::new(cls.actual_segments().map(|s| s.line));

@@ -17,15 +17,7 @@ pub fn map(
     config: Option<&Path>,
     relations: Option<&Path>,
 ) -> anyhow::Result<ExitCode> {
-    let config = match config {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("cannot read the configuration {}", path.display()))?;
-            MapperConfig::from_toml(&text)
-                .with_context(|| format!("invalid configuration {}", path.display()))?
-        }
-        None => MapperConfig::default(),
-    };
+    let config = mapper_config(config)?;
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template(
             "{spinner} mapping [{bar:40}] {percent:>3}% {msg} ({elapsed} elapsed, {eta} left)",
@@ -158,4 +150,15 @@ pub fn render(map: &Path, output: &Path, resolution: f64) -> anyhow::Result<Exit
         println!("wrote {}", output.display());
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The mapper configuration from `path` (TOML), or the defaults.
+pub fn mapper_config(path: Option<&Path>) -> anyhow::Result<MapperConfig> {
+    let Some(path) = path else {
+        return Ok(MapperConfig::default());
+    };
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read the configuration {}", path.display()))?;
+    MapperConfig::from_toml(&text)
+        .with_context(|| format!("invalid configuration {}", path.display()))
 }
