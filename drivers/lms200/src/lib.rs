@@ -48,6 +48,20 @@
 //!              LengthMismatch{expected, actual}, Implausible(Implausibility), Truncated,
 //!              UnexpectedByte}, Implausibility
 //! ```
+//!
+//! # Link, emulator and shells
+//!
+//! ```text
+//! link         Link: sans-IO state machine from any sensor state to streaming
+//! emulator     Emulator: sans-IO LMS200 that speaks the protocol byte for byte
+//! serial       SerialTransport: the tty, opened exclusively, paced host bytes
+//! driver       SerialDriver: the Link on a SerialTransport, optionally recorded
+//! pty          PtyEmulator: the Emulator behind a pseudo-terminal, in a thread
+//! recording    RecordingWriter, RecordingReader: raw bytes both ways, versioned
+//! virtual_line VirtualLine::{new, now, step, advance_to, link(_mut), emulator(_mut),
+//!                host_baud, set_host_stuck_at_9600, into_parts}: Link and Emulator
+//!              back to back on a virtual clock; Wire (the same without owning them)
+//! ```
 
 pub mod command;
 pub mod config_block;
@@ -65,6 +79,7 @@ pub mod link;
 pub mod pty;
 pub mod recording;
 pub mod serial;
+pub mod virtual_line;
 
 #[cfg(test)]
 mod test_util;

@@ -1,41 +1,33 @@
-//! Wires a `Link` to an `Emulator` on a virtual clock.
+//! Wires a `Link` to an `Emulator` on a virtual clock: the library's
+//! [`Wire`] (see `lms200::virtual_line` for the line's semantics) plus a log
+//! of everything the link emitted and sent, for the tests to inspect.
 //!
-//! Host bytes take their wire time at the host's line speed to reach the
-//! sensor; the emulator paces its own output. `SetBaud` from the link sets
-//! the harness's host speed and tells the emulator (`set_host_baud`), which
-//! garbles bytes while the two speeds differ. The clock jumps to the earliest
-//! of both sides' deadlines and the next host byte arrival.
+//! The harness owns the two peers as fields (a test moves the emulator on to
+//! a second link), so it drives a `Wire` rather than a `VirtualLine`.
 
-use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use lms200::Baud;
 use lms200::emulator::{Emulator, EmulatorConfig, SentScan};
-use lms200::link::{Event, Link, LinkConfig, LinkError, Output, TimedScan};
+use lms200::link::{Event, Link, LinkConfig, LinkError, TimedScan};
+use lms200::virtual_line::{HostOutput, Wire};
 
 /// Both peers and the line between them.
 pub struct Harness {
+    /// The virtual clock (mirrors the wire after every step).
     pub now: Instant,
     pub link: Link,
     pub emulator: Emulator,
-    /// The host tty's speed.
+    /// The host tty's speed (mirrors the wire after every step).
     pub host_baud: Baud,
-    /// Host bytes on their way to the sensor: (arrival time, bytes).
-    in_flight: VecDeque<(Instant, Vec<u8>)>,
-    /// When the host's transmitter is free again.
-    host_tx_free: Instant,
+    wire: Wire,
     /// Every event the link emitted, with the time.
     pub log: Vec<(Instant, Event)>,
     /// Every frame the link sent, with the time it was handed to the port.
     pub transmits: Vec<(Instant, Vec<u8>)>,
     /// Ignore `SetBaud`: the host tty stays at 9600 (a shell that forgot to
-    /// change the line speed).
+    /// change the line speed). Applied at every step.
     pub host_stuck_at_9600: bool,
-}
-
-/// Time `bytes` bytes take at `baud`, 10 bits each.
-fn wire_time(bytes: usize, baud: Baud) -> Duration {
-    Duration::from_nanos((bytes as u64) * 10 * 1_000_000_000 / u64::from(baud.bits_per_second()))
 }
 
 impl Harness {
@@ -46,14 +38,13 @@ impl Harness {
 
     /// A new link (a second run of the driver) against an existing sensor.
     pub fn with_emulator(link: LinkConfig, mut emulator: Emulator, now: Instant) -> Self {
-        emulator.set_host_baud(Baud::B9600);
+        let wire = Wire::connect(&mut emulator, now);
         Self {
             now,
             link: Link::new(link, now),
             emulator,
-            host_baud: Baud::B9600,
-            in_flight: VecDeque::new(),
-            host_tx_free: now,
+            host_baud: wire.host_baud(),
+            wire,
             log: Vec::new(),
             transmits: Vec::new(),
             host_stuck_at_9600: false,
@@ -63,54 +54,31 @@ impl Harness {
     /// Moves everything that is due now, then advances the clock once.
     /// Returns false when neither side has anything left to do.
     pub fn step(&mut self) -> bool {
-        self.drain_link_outputs();
-        if let Some(bytes) = self.emulator.poll_transmit(self.now) {
-            self.link.handle_input(&bytes, self.now);
-            return true;
-        }
-        let arrival = self.in_flight.front().map(|(t, _)| *t);
-        let next = [
-            self.link.poll_timeout(),
-            self.emulator.poll_timeout(),
-            arrival,
-        ]
-        .into_iter()
-        .flatten()
-        .min();
-        let Some(next) = next else {
-            return false;
-        };
-        self.now = self.now.max(next);
-        while let Some((t, _)) = self.in_flight.front()
-            && *t <= self.now
-        {
-            let (t, bytes) = self.in_flight.pop_front().unwrap();
-            self.emulator.handle_input(&bytes, t);
-        }
-        self.emulator.handle_timeout(self.now);
-        self.link.handle_timeout(self.now);
-        true
+        self.wire.set_host_stuck_at_9600(self.host_stuck_at_9600);
+        let (log, transmits) = (&mut self.log, &mut self.transmits);
+        let more = self
+            .wire
+            .step(&mut self.link, &mut self.emulator, |at, output| {
+                record(log, transmits, at, output)
+            });
+        self.sync();
+        more
     }
 
     fn drain_link_outputs(&mut self) {
-        while let Some(output) = self.link.poll_output() {
-            match output {
-                Output::Transmit(bytes) => {
-                    let start = self.now.max(self.host_tx_free);
-                    let arrival = start + wire_time(bytes.len(), self.host_baud);
-                    self.host_tx_free = arrival;
-                    self.transmits.push((self.now, bytes.clone()));
-                    self.in_flight.push_back((arrival, bytes));
-                }
-                Output::SetBaud(baud) => {
-                    if !self.host_stuck_at_9600 {
-                        self.host_baud = baud;
-                        self.emulator.set_host_baud(baud);
-                    }
-                }
-                Output::Event(event) => self.log.push((self.now, event)),
-            }
-        }
+        self.wire.set_host_stuck_at_9600(self.host_stuck_at_9600);
+        let (log, transmits) = (&mut self.log, &mut self.transmits);
+        self.wire
+            .flush(&mut self.link, &mut self.emulator, |at, output| {
+                record(log, transmits, at, output)
+            });
+        self.sync();
+    }
+
+    /// Copies the wire's clock and host speed into the public fields.
+    fn sync(&mut self) {
+        self.now = self.wire.now();
+        self.host_baud = self.wire.host_baud();
     }
 
     /// Runs until `done` holds or `limit` of virtual time has passed.
@@ -207,5 +175,19 @@ impl Harness {
             .map(|(_, e)| format!("{e:?}"))
             .take(40)
             .collect()
+    }
+}
+
+/// Keeps what the tests inspect: events and transmitted frames.
+fn record(
+    log: &mut Vec<(Instant, Event)>,
+    transmits: &mut Vec<(Instant, Vec<u8>)>,
+    at: Instant,
+    output: HostOutput<'_>,
+) {
+    match output {
+        HostOutput::Transmit(bytes) => transmits.push((at, bytes.to_vec())),
+        HostOutput::SetBaud(_) => {}
+        HostOutput::Event(event) => log.push((at, event)),
     }
 }
