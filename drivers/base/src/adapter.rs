@@ -39,6 +39,12 @@ pub enum BaseError {
 
 /// A mobile base the daemon can drive. Times are seconds on one monotonic clock.
 pub trait BaseAdapter {
+    /// Tells the adapter the time is `now` (s): a simulated or replayed
+    /// base moves its clock, a bridged base stamps what arrived with it.
+    /// Called by the daemon before every poll; the default does nothing.
+    fn advance(&mut self, now: f64) {
+        let _ = now;
+    }
     /// Newest odometry sample not yet returned, or `None`; never blocks.
     fn odometry(&mut self) -> Option<OdometrySample>;
     /// Commands a robot-frame velocity (m/s, m/s, rad/s) at time `now` (s).

@@ -7,13 +7,20 @@
 //! - [`sim`]: a deterministic simulated base with odometry error.
 //! - [`line_protocol`]: a sans-IO text protocol to bridge any real base over a
 //!   serial port or TCP.
+//! - [`line_base`]: [`LineBase`], the line protocol over TCP, a serial port or
+//!   any [`LineStream`].
+//! - [`replay`]: [`ReplayBase`], recorded odometry played back in real time.
 
 pub mod adapter;
 pub mod kinematics;
+pub mod line_base;
 pub mod line_protocol;
+pub mod replay;
 pub mod sim;
 
 pub use adapter::{BaseAdapter, BaseError, Health, OdometrySample, StaleGuard};
 pub use kinematics::{BasePose, Limits, Twist, integrate, limit, wrap_angle};
+pub use line_base::{LineBase, LineBaseStats, LineStream};
 pub use line_protocol::{BaseMessage, Command, LineDecoder, ProtocolError, encode_command};
+pub use replay::{ReplayBase, ReplayError};
 pub use sim::SimBase;

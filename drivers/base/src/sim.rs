@@ -104,6 +104,10 @@ impl SimBase {
 }
 
 impl BaseAdapter for SimBase {
+    fn advance(&mut self, now: f64) {
+        SimBase::advance(self, now);
+    }
+
     fn odometry(&mut self) -> Option<OdometrySample> {
         let t = self.now?;
         if self.odometry_frozen || self.last_reported == Some(t) {
