@@ -1,42 +1,42 @@
-//! `clsmap demo`: the whole chain on one machine, at real line speed.
+//! `clsmap demo`: the daemon on a simulated robot, start to finish.
 //!
-//! An emulated LMS200 on a pseudo-terminal measures a built-in floor plan by
-//! ray casting while a simulated holonomic base drives a scripted tour; the
-//! real serial driver opens the pty, auto-bauds, configures the sensor and
-//! streams at 500 kBd; each scan is converted to SI, paired with drifting
-//! simulated odometry, localized against the map and fused into it. At the
-//! end the map, its picture and the trajectory are written, and the
-//! estimate is scored against the simulator's ground truth.
+//! The configuration is `config/demo.toml`, built in: an emulated LMS200 on
+//! a pseudo-terminal measures a built-in floor plan from a simulated
+//! holonomic base; the real serial driver opens the pty, auto-bauds,
+//! configures the sensor and streams at 500 kBd; the daemon's loop
+//! localizes every scan against the map, grows the CLS map on keyframes
+//! and explores by Virtual Line Segment Pursuit until no frontier is left.
+//! The map, its picture and the trajectory are written, and the run is
+//! scored against the simulator's truth: pose error, and how much of the
+//! map's wall length lies on the world's walls.
 
 use std::io;
-use std::ops::ControlFlow;
-use std::path::PathBuf;
-use std::time::Instant;
+use std::path::{Path, PathBuf};
 
-use lms200::driver::{DriverError, SerialDriver};
-use lms200::emulator::{Emulator, EmulatorConfig};
-use lms200::link::{Event, LinkConfig, LinkStats};
-use lms200::pty::{PtyEmulator, PtyError};
 use serde::Serialize;
 
+use crate::daemon::runtime::{DaemonError, Hooks, RunSummary, ScanProgress, StopReason, run};
+use crate::daemon::simulation::load_world;
+use crate::daemon::{DaemonConfig, DaemonConfigError, StageSummary};
 use crate::geometry::{Pose2, wrap_angle};
-use crate::input::ScanRecord;
-use crate::input::lms200::range_scan;
-use crate::mapping_config::MapperConfig;
-use crate::pipeline::{OfflineMapper, PipelineError, write_outputs};
-use crate::sim::{LMS200_MAX_RANGE_MM_MODE, Rng, Tour, World, WorldRangeSource};
+use crate::map::cls::{ClsMap, ClsMapConfig, StoreError};
+use crate::pipeline::MAP_FILE;
+use crate::sim::World;
+
+/// The demo's configuration, as shipped in `config/demo.toml`.
+pub const DEMO_CONFIG: &str = include_str!("../config/demo.toml");
 
 /// Why the demo failed.
 #[derive(Debug, thiserror::Error)]
 pub enum DemoError {
-    #[error("cannot start the emulated LMS200")]
-    Emulator(#[from] PtyError),
-    #[error("the serial driver failed")]
-    Driver(#[from] DriverError),
-    #[error("the sensor delivered no scan (link: {0})")]
-    NoScans(String),
-    #[error("cannot write the results")]
-    Output(#[from] PipelineError),
+    #[error("the demo configuration is invalid")]
+    Config(#[from] DaemonConfigError),
+    #[error("the daemon failed")]
+    Daemon(#[from] DaemonError),
+    #[error("the sensor delivered no scan")]
+    NoScans,
+    #[error("cannot read back the saved map")]
+    Map(#[from] StoreError),
     #[error("cannot write {path}")]
     Io {
         path: PathBuf,
@@ -45,264 +45,193 @@ pub enum DemoError {
     },
 }
 
-/// A world and the tour the robot drives through it.
-#[derive(Debug, Clone)]
-pub struct Scenario {
-    pub name: String,
-    pub world: World,
-    pub tour: Tour,
+/// The built-in demo configuration (a test keeps it valid).
+pub fn demo_config() -> Result<DaemonConfig, DaemonConfigError> {
+    DaemonConfig::from_toml(DEMO_CONFIG)
 }
 
-impl Scenario {
-    /// The built-in default: once around a 2 m wide corridor loop around a
-    /// central 8 m × 6 m block, and on past the start so the loop closes.
-    pub fn loop_around_block(speed: f64) -> Scenario {
-        use std::f64::consts::{FRAC_PI_2, PI};
-        let waypoints = vec![
-            Pose2::new(1.0, 1.0, 0.0),
-            Pose2::new(11.0, 1.0, 0.0),
-            Pose2::new(11.0, 1.0, FRAC_PI_2),
-            Pose2::new(11.0, 9.0, FRAC_PI_2),
-            Pose2::new(11.0, 9.0, PI),
-            Pose2::new(1.0, 9.0, PI),
-            Pose2::new(1.0, 9.0, -FRAC_PI_2),
-            Pose2::new(1.0, 1.0, -FRAC_PI_2),
-            Pose2::new(1.0, 1.0, 0.0),
-            Pose2::new(5.0, 1.0, 0.0),
-        ];
-        Scenario {
-            name: "loop around a block".into(),
-            world: World::loop_around_block(),
-            tour: Tour::new(waypoints, speed, FRAC_PI_2),
-        }
-    }
-}
-
-/// How the demo runs.
-#[derive(Debug, Clone)]
-pub struct DemoOptions {
-    pub out_dir: PathBuf,
-    /// Seed of the range noise and the odometry errors.
-    pub seed: u64,
-    /// Range noise of the emulated sensor (m); the LMS200's is about 1 cm.
-    pub range_sigma: f64,
-    /// Odometry scale error (fraction of the distance travelled).
-    pub odometry_scale_error: f64,
-    /// Odometry heading drift (rad per metre travelled).
-    pub odometry_heading_drift: f64,
-    /// Time the robot waits before driving, while the driver connects (s).
-    pub start_delay: f64,
-    pub mapper: MapperConfig,
-}
-
-impl DemoOptions {
-    pub fn new(out_dir: impl Into<PathBuf>) -> Self {
-        DemoOptions {
-            out_dir: out_dir.into(),
-            seed: 7,
-            range_sigma: 0.01,
-            odometry_scale_error: 0.02,
-            odometry_heading_drift: 0.01,
-            start_delay: 1.5,
-            mapper: MapperConfig::default(),
-        }
-    }
-}
-
-/// Live progress, reported after every scan.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Live progress, after every scan.
+#[derive(Debug, Clone, PartialEq)]
 pub struct DemoProgress {
-    /// Seconds into the tour.
+    /// Seconds since the start.
     pub t: f64,
-    pub tour_duration: f64,
-    pub scans: usize,
-    pub segments: usize,
+    pub scans: u64,
+    pub walls: usize,
+    pub frontiers: usize,
+    /// Exploration goals chosen so far.
+    pub goals: usize,
     /// Distance of the estimate from the truth (m).
     pub error: f64,
-    /// Distance of the odometry from the truth (m).
-    pub odometry_error: f64,
 }
 
 /// What the demo did and how well.
 #[derive(Debug, Clone, Serialize)]
 pub struct DemoSummary {
-    pub scenario: String,
-    pub scans: usize,
-    pub segments: usize,
-    /// Actual and virtual segments and loops of the CLS map.
-    pub cls_actual: usize,
-    pub cls_virtual: usize,
-    pub cls_loops: usize,
-    pub connected_baud: Option<u32>,
-    pub dropped_frames: u64,
-    /// Mean and largest position error of the estimate against the truth (m).
+    pub world: String,
+    pub reason: StopReason,
+    pub exploration_complete: bool,
+    pub run_time_s: f64,
+    pub scans: u64,
+    pub scans_skipped: u64,
+    /// Actual and virtual segments and loops of the saved CLS map.
+    pub walls: usize,
+    pub frontiers: usize,
+    pub loops: usize,
+    pub goals: usize,
+    /// Metres driven (truth).
+    pub driven_m: f64,
+    /// Mean and largest position error of the estimate (m) and largest
+    /// heading error (deg), against the simulator's truth.
     pub mean_error_m: f64,
     pub max_error_m: f64,
-    /// Largest heading error of the estimate (deg).
     pub max_heading_error_deg: f64,
-    /// Position error of the odometry alone at the end (m).
-    pub odometry_final_error_m: f64,
-    /// Position error of the estimate at the end (m).
-    pub final_error_m: f64,
+    /// Share of the map's wall length within 5 cm of a real wall.
+    pub walls_on_world: f64,
+    pub latencies: Vec<StageSummary>,
     pub out_dir: PathBuf,
 }
 
-/// Integrates the true motion with scale error, heading drift and noise,
-/// as wheel odometry does.
-#[derive(Debug)]
-struct SimulatedOdometry {
+/// Accumulates the error of the estimate against the truth.
+#[derive(Debug, Default)]
+struct Score {
+    origin: Option<Pose2>,
     last_truth: Option<Pose2>,
-    pose: Pose2,
-    scale_error: f64,
-    heading_drift: f64,
-    rng: Rng,
+    driven: f64,
+    sum: f64,
+    n: u64,
+    max: f64,
+    max_heading: f64,
+    last: f64,
 }
 
-impl SimulatedOdometry {
-    fn step(&mut self, truth: Pose2) -> Pose2 {
+impl Score {
+    fn add(&mut self, estimate: Pose2, truth: Pose2) {
+        let origin = *self.origin.get_or_insert(truth);
         if let Some(last) = self.last_truth {
-            let d = last.between(&truth);
-            let dist = d.x.hypot(d.y);
-            let noisy = Pose2::new(
-                d.x * (1.0 + self.scale_error) + self.rng.normal(0.002 * dist),
-                d.y * (1.0 + self.scale_error) + self.rng.normal(0.002 * dist),
-                d.theta + self.heading_drift * dist + self.rng.normal(0.002 * dist),
-            );
-            self.pose = self.pose.compose(&noisy);
-        } else {
-            self.pose = truth;
+            self.driven += (truth.x - last.x).hypot(truth.y - last.y);
         }
         self.last_truth = Some(truth);
-        self.pose
+        let t = origin.between(&truth);
+        let e = (estimate.x - t.x).hypot(estimate.y - t.y);
+        self.sum += e;
+        self.n += 1;
+        self.max = self.max.max(e);
+        self.max_heading = self
+            .max_heading
+            .max(wrap_angle(estimate.theta - t.theta).abs());
+        self.last = e;
     }
 }
 
-/// Runs the demo to the end of the scenario's tour.
+/// Share of `map`'s wall length (map frame, whose origin is `origin` in
+/// the world) lying within `tolerance` metres of one of `world`'s walls,
+/// sampled every centimetre.
+pub fn walls_on_world(map: &ClsMap, world: &World, origin: Pose2, tolerance: f64) -> f64 {
+    let (mut good, mut total) = (0usize, 0usize);
+    for s in map.actual_segments() {
+        let (a, b) = (
+            origin.transform_point(s.start()),
+            origin.transform_point(s.end()),
+        );
+        let n = ((b[0] - a[0]).hypot(b[1] - a[1]) / 0.01).ceil().max(1.0) as usize;
+        for k in 0..n {
+            let f = (k as f64 + 0.5) / n as f64;
+            let p = [a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])];
+            total += 1;
+            good += usize::from(
+                world
+                    .walls()
+                    .iter()
+                    .any(|w| point_segment_distance(p, w[0], w[1]) <= tolerance),
+            );
+        }
+    }
+    good as f64 / total.max(1) as f64
+}
+
+fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len2 = dx * dx + dy * dy;
+    let t = if len2 > 0.0 {
+        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
+}
+
+/// Runs `config` (the demo's, or a variation of it) with its maps written
+/// to `out_dir`, until exploration completes or its time limit passes.
 pub fn run_demo(
-    scenario: &Scenario,
-    options: &DemoOptions,
+    config: DaemonConfig,
+    out_dir: &Path,
     mut on_progress: impl FnMut(&DemoProgress),
 ) -> Result<DemoSummary, DemoError> {
-    let t0 = Instant::now();
-    // The tour's clock starts `start_delay` after the emulator's.
-    let delay = options.start_delay.max(0.0);
-    let shifted_tour = scenario.tour.delayed(delay);
-    let source = WorldRangeSource::new(
-        scenario.world.clone(),
-        shifted_tour.clone(),
-        Pose2::IDENTITY,
-        LMS200_MAX_RANGE_MM_MODE,
-        options.range_sigma,
-        options.seed,
-    );
-    let sensor = EmulatorConfig {
-        power_on_delay: None,
-        ..EmulatorConfig::default()
-    };
-    let emulator = Emulator::with_range_source(sensor, Box::new(source), t0);
-    let pty = PtyEmulator::spawn(emulator, None)?;
-    let link = LinkConfig::default();
-    let mode = link.measuring_mode;
-    let mut driver = SerialDriver::open(pty.tty_path(), link)?;
-
-    let mut mapper = OfflineMapper::new(options.mapper);
-    let mut odometry = SimulatedOdometry {
-        last_truth: None,
-        pose: Pose2::IDENTITY,
-        scale_error: options.odometry_scale_error,
-        heading_drift: options.odometry_heading_drift,
-        rng: Rng::new(options.seed ^ 0x0D0),
-    };
-    let end = shifted_tour.duration() + 0.3;
-    let mut truth_origin: Option<(Pose2, Pose2)> = None;
-    let mut errors = Vec::new();
-    let mut heading_errors = Vec::new();
-    let mut last_odometry_error = 0.0;
-    let mut connected_baud = None;
-    let mut link_errors = Vec::new();
-    driver.run(
-        || t0.elapsed().as_secs_f64() > end + 30.0,
-        |event| {
-            match event {
-                Event::Connected { baud, .. } => connected_baud = Some(baud.bits_per_second()),
-                Event::Error(e) => link_errors.push(e.to_string()),
-                Event::Scan(timed) => {
-                    let t = timed.timestamp.saturating_duration_since(t0).as_secs_f64();
-                    if t < delay {
-                        // Still parked while the link came up: nothing to map yet.
-                        return ControlFlow::Continue(());
-                    }
-                    let Some(scan) = range_scan(&timed.scan, t, mode) else {
-                        return ControlFlow::Continue(());
-                    };
-                    let truth = shifted_tour.pose_at(t);
-                    let odo = odometry.step(truth);
-                    mapper.process(&ScanRecord {
-                        scan,
-                        odometry: Some(odo),
-                    });
-                    let (truth0, odo0) = *truth_origin.get_or_insert((truth, odo));
-                    let truth_map = truth0.between(&truth);
-                    let odo_map = odo0.between(&odo);
-                    if let Some((_, est)) = mapper.trajectory().last() {
-                        let e = (est.x - truth_map.x).hypot(est.y - truth_map.y);
-                        errors.push(e);
-                        heading_errors.push(wrap_angle(est.theta - truth_map.theta).abs());
-                        last_odometry_error =
-                            (odo_map.x - truth_map.x).hypot(odo_map.y - truth_map.y);
-                        on_progress(&DemoProgress {
-                            t: t - delay,
-                            tour_duration: scenario.tour.duration(),
-                            scans: mapper.trajectory().len(),
-                            segments: mapper.map().len(),
-                            error: e,
-                            odometry_error: last_odometry_error,
-                        });
-                    }
-                    if t > end {
-                        return ControlFlow::Break(());
-                    }
-                }
-                _ => {}
-            }
-            ControlFlow::Continue(())
-        },
-    )?;
-    let stats: LinkStats = driver.stats();
-    drop(driver);
-    drop(pty);
-    if errors.is_empty() {
-        return Err(DemoError::NoScans(
-            link_errors
-                .last()
-                .cloned()
-                .unwrap_or_else(|| "no error reported".into()),
-        ));
+    let world = load_world(&config.sim.world)?;
+    let score = std::rc::Rc::new(std::cell::RefCell::new(Score::default()));
+    let hook_score = score.clone();
+    let mut hooks = Hooks::until(std::future::pending());
+    hooks.out_dir = Some(out_dir.to_owned());
+    hooks.on_scan = Some(Box::new(move |p: &ScanProgress| {
+        let mut s = hook_score.borrow_mut();
+        if let Some(truth) = p.truth {
+            s.add(p.pose, truth);
+        }
+        on_progress(&DemoProgress {
+            t: p.t,
+            scans: p.status.scans,
+            walls: p.status.walls,
+            frontiers: p.status.frontiers,
+            goals: p.status.explorer.map_or(0, |e| e.goals),
+            error: s.last,
+        });
+    }));
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(DaemonError::Runtime)?;
+    let summary: RunSummary = runtime.block_on(run(config.clone(), hooks))?;
+    let score = score.borrow();
+    if score.n == 0 {
+        return Err(DemoError::NoScans);
     }
-    write_outputs(&options.out_dir, &mapper)?;
-    let summary = DemoSummary {
-        scenario: scenario.name.clone(),
-        scans: mapper.trajectory().len(),
-        segments: mapper.map().len(),
-        cls_actual: mapper.cls_map().actual_segments().count(),
-        cls_virtual: mapper.cls_map().virtual_segments().count(),
-        cls_loops: mapper.cls_map().loops().count(),
-        connected_baud,
-        dropped_frames: stats.dropped_frames,
-        mean_error_m: errors.iter().sum::<f64>() / errors.len() as f64,
-        max_error_m: errors.iter().copied().fold(0.0, f64::max),
-        max_heading_error_deg: heading_errors
-            .iter()
-            .copied()
-            .fold(0.0, f64::max)
-            .to_degrees(),
-        odometry_final_error_m: last_odometry_error,
-        final_error_m: errors.last().copied().unwrap_or(0.0),
-        out_dir: options.out_dir.clone(),
+    let map = ClsMap::load(&summary.out_dir.join(MAP_FILE), ClsMapConfig::default())?;
+    let origin = score.origin.unwrap_or(world.start);
+    let result = DemoSummary {
+        world: world.name.clone(),
+        reason: summary.reason,
+        exploration_complete: summary.status.exploration_complete,
+        run_time_s: summary.run_time,
+        scans: summary.scans,
+        scans_skipped: summary.scans_skipped,
+        walls: map.actual_segments().count(),
+        frontiers: map.virtual_segments().count(),
+        loops: map.loops().count(),
+        goals: summary.status.explorer.map_or(0, |e| e.goals),
+        driven_m: score.driven,
+        mean_error_m: score.sum / score.n as f64,
+        max_error_m: score.max,
+        max_heading_error_deg: score.max_heading.to_degrees(),
+        walls_on_world: walls_on_world(&map, &world.world, origin, 0.05),
+        latencies: summary.latencies,
+        out_dir: summary.out_dir.clone(),
     };
-    let path = options.out_dir.join("demo.json");
-    let text = serde_json::to_string_pretty(&summary).map_err(io::Error::from);
+    let path = summary.out_dir.join("demo.json");
+    let text = serde_json::to_string_pretty(&result).map_err(io::Error::from);
     text.and_then(|t| crate::durable::write_atomically(&path, (t + "\n").as_bytes()))
         .map_err(|source| DemoError::Io { path, source })?;
-    Ok(summary)
+    Ok(result)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_built_in_configuration_is_valid() {
+        let c = demo_config().unwrap();
+        assert!(c.exploration.enabled && c.exploration.exit_when_complete);
+        assert!(load_world(&c.sim.world).is_ok());
+    }
 }

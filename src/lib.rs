@@ -1,6 +1,7 @@
 //! clsmap: a SICK LMS200 driver and Closed Line Segment mapper
 //! (after Zhang & Ghosh, ICRA 2000) for holonomic robots.
 
+pub mod daemon;
 pub mod demo;
 pub mod durable;
 pub mod eval;

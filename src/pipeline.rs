@@ -96,12 +96,15 @@ pub struct ScanOutcome {
 struct StageClock {
     total: Duration,
     runs: usize,
+    /// Time in the last scan processed, if the stage ran in it.
+    last: Option<Duration>,
 }
 
 impl StageClock {
     fn add(&mut self, d: Duration) {
         self.total += d;
         self.runs += 1;
+        self.last = Some(d);
     }
 
     fn mean_us(&self) -> f64 {
@@ -128,6 +131,18 @@ pub struct StageTimes {
     pub cls_update_us: f64,
     /// Whole pipeline, per scan.
     pub per_scan_us: f64,
+}
+
+/// Wall-clock time of each stage in the last scan processed; `None` for
+/// a stage that did not run in it (no map yet, not a keyframe).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct LastScanTimes {
+    pub predict: Option<Duration>,
+    pub extract: Option<Duration>,
+    pub localize: Option<Duration>,
+    pub map_update: Option<Duration>,
+    pub cls_update: Option<Duration>,
+    pub whole: Option<Duration>,
 }
 
 /// Summary of a mapping run.
@@ -280,6 +295,58 @@ impl OfflineMapper {
         s
     }
 
+    /// Takes the parts of `config` that can change while mapping: line
+    /// extraction, localization, keyframes, odometry noise and the
+    /// correction gates. The laser mounting, the fusion gates, the CLS map
+    /// and the odometry time offset shape what is already in the map or in
+    /// flight; they are kept, and their names returned when `config` would
+    /// change them (they need a restart).
+    pub fn retune(&mut self, config: MapperConfig) -> Vec<&'static str> {
+        let mut kept = Vec::new();
+        let old = self.config;
+        if config.laser_mount != old.laser_mount {
+            kept.push("laser_mount");
+        }
+        if config.map != old.map {
+            kept.push("map");
+        }
+        if config.cls != old.cls {
+            kept.push("cls");
+        }
+        if config.odometry_time_offset != old.odometry_time_offset {
+            kept.push("odometry_time_offset");
+        }
+        self.config = MapperConfig {
+            laser_mount: old.laser_mount,
+            map: old.map,
+            cls: old.cls,
+            odometry_time_offset: old.odometry_time_offset,
+            ..config
+        };
+        self.keyframes.retune(config.keyframes);
+        kept
+    }
+
+    /// Odometry from a live base: a sample equal to the previous one is the
+    /// robot standing still, not frozen odometry as in logs (see
+    /// [`OdometryFeed`]). Without this a robot resting for a few seconds
+    /// gets a prediction as uncertain as if it had no odometry at all.
+    pub fn trust_unchanged_odometry(&mut self) {
+        self.odometry.trust_unchanged(true);
+    }
+
+    /// How long each stage took in the last scan processed.
+    pub fn last_scan_times(&self) -> LastScanTimes {
+        LastScanTimes {
+            predict: self.clocks[PREDICT].last,
+            extract: self.clocks[EXTRACT].last,
+            localize: self.clocks[LOCALIZE].last,
+            map_update: self.clocks[MAP_UPDATE].last,
+            cls_update: self.clocks[CLS_UPDATE].last,
+            whole: self.clocks[WHOLE].last,
+        }
+    }
+
     /// Localizes the current lines against the map; when the map offers
     /// too few matches (curved walls cut into different chords by each
     /// scan, freshly entered space), against the previous scan's lines,
@@ -313,6 +380,9 @@ impl OfflineMapper {
     /// Processes one scan; returns what became of it.
     pub fn process(&mut self, record: &ScanRecord) -> ScanOutcome {
         let started = Instant::now();
+        for clock in &mut self.clocks {
+            clock.last = None;
+        }
         let _scan_span = trace_span!("scan", t = record.scan.t).entered();
         if record.odometry.is_none() {
             self.summary.scans_without_odometry += 1;

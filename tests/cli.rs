@@ -943,3 +943,216 @@ fn probe_record_and_decode_against_the_emulator_then_stop_it_with_ctrl_c() {
         link.display()
     );
 }
+
+// ---------------------------------------------------------------------------
+// clsmap run: the daemon as systemd runs it, driven by signals.
+// ---------------------------------------------------------------------------
+
+/// A running `clsmap run`, its stderr lines arriving on a channel.
+struct Daemon {
+    child: Child,
+    lines: std::sync::mpsc::Receiver<String>,
+    seen: Vec<String>,
+}
+
+impl Daemon {
+    fn start(config: &Path) -> Daemon {
+        let mut child = clsmap_command()
+            .args(["run", "--config", arg(config)])
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let (tx, lines) = std::sync::mpsc::channel();
+        let stderr = child.stderr.take().unwrap();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines() {
+                let Ok(line) = line else { break };
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        Daemon {
+            child,
+            lines,
+            seen: Vec::new(),
+        }
+    }
+
+    /// Waits (at most `limit`) for a stderr line containing `text`.
+    fn wait_for(&mut self, text: &str, limit: Duration) {
+        let deadline = Instant::now() + limit;
+        if self.seen.iter().any(|l| l.contains(text)) {
+            return;
+        }
+        while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+            match self.lines.recv_timeout(left) {
+                Ok(line) => {
+                    let found = line.contains(text);
+                    self.seen.push(line);
+                    if found {
+                        return;
+                    }
+                }
+                Err(_) => break,
+            }
+        }
+        let _ = self.child.kill();
+        panic!(
+            "no line with {text:?} within {limit:?}; stderr so far:\n{}",
+            self.seen.join("\n")
+        );
+    }
+
+    fn signal(&self, name: &str) {
+        let status = Command::new("kill")
+            .args([&format!("-{name}"), &self.child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success(), "kill -{name} failed");
+    }
+
+    /// Waits for the exit; returns the status, stdout and all of stderr.
+    fn finish(mut self, limit: Duration) -> (ExitStatus, String, String) {
+        let stdout = drain(self.child.stdout.take());
+        let status = wait_at_most(&mut self.child, limit)
+            .unwrap_or_else(|| panic!("clsmap run did not stop within {limit:?}"));
+        self.seen.extend(self.lines.try_iter());
+        // The reader thread ends with the pipe; collect what is left.
+        std::thread::sleep(Duration::from_millis(50));
+        self.seen.extend(self.lines.try_iter());
+        (status, stdout.join().unwrap(), self.seen.join("\n"))
+    }
+}
+
+fn demo_run_config(dir: &TempDir, extra: &str) -> PathBuf {
+    let text =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("config/demo.toml"))
+            .unwrap()
+            .replace("exit_when_complete = true", "exit_when_complete = false")
+            .replace("checkpoint_interval = 10.0", "checkpoint_interval = 1.0")
+            .replace("status_interval = 5.0", "status_interval = 1.0")
+            .replace(
+                "[daemon]",
+                &format!(
+                    "[daemon]\nstate_dir = {:?}",
+                    dir.join("state").display().to_string()
+                ),
+            );
+    let path = dir.join("clsmap.toml");
+    std::fs::write(&path, format!("{text}\n{extra}")).unwrap();
+    path
+}
+
+/// The one run directory `clsmap run` made below `state`.
+fn run_dir(state: &Path) -> PathBuf {
+    let dirs: Vec<PathBuf> = std::fs::read_dir(state)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(dirs.len(), 1, "{dirs:?}");
+    dirs[0].clone()
+}
+
+#[test]
+fn run_reloads_on_sighup_and_stops_cleanly_on_sigterm_leaving_a_loadable_map() {
+    let dir = TempDir::new("run-sigterm");
+    let config = demo_run_config(&dir, "");
+    let mut daemon = Daemon::start(&config);
+    daemon.wait_for("first scan mapped", Duration::from_secs(60));
+    daemon.wait_for("exploration: new goal", Duration::from_secs(60));
+    // A tunable change is applied; a change of the sensor needs a restart.
+    let text = std::fs::read_to_string(&config).unwrap();
+    std::fs::write(
+        &config,
+        text.replace("speed = 0.6", "speed = 0.4")
+            .replace("[sensor]", "[sensor]\nsilence_stop = 0.8"),
+    )
+    .unwrap();
+    daemon.signal("HUP");
+    daemon.wait_for(
+        "need a restart and are not applied: sensor",
+        Duration::from_secs(20),
+    );
+    // A broken file is refused and the running configuration stays.
+    std::fs::write(&config, "[sensor]\nbaud = 57600\n").unwrap();
+    daemon.signal("HUP");
+    daemon.wait_for("reload refused", Duration::from_secs(20));
+    daemon.wait_for("sensor.baud (line 2)", Duration::from_secs(1));
+    daemon.wait_for("exploration: goal reached", Duration::from_secs(60));
+    daemon.signal("TERM");
+    let (status, stdout, stderr) = daemon.finish(Duration::from_secs(30));
+    assert!(status.success(), "{status}\n{stderr}");
+    assert!(stdout.contains("stopped (Shutdown)"), "{stdout}");
+    assert!(stderr.contains("SIGTERM: stopping"), "{stderr}");
+    // The link was closed: the sensor stopped streaming before the exit.
+    assert!(stderr.contains("sensor link closed"), "{stderr}");
+    let run = run_dir(&dir.join("state"));
+    let map = clsmap::map::cls::ClsMap::load(
+        &run.join("map.json"),
+        clsmap::map::cls::ClsMapConfig::default(),
+    )
+    .unwrap();
+    map.check_invariants().unwrap();
+    assert!(map.actual_segments().count() > 3, "{stderr}");
+    assert!(run.join("map.svg").is_file() && run.join("trajectory.tum").is_file());
+}
+
+#[test]
+fn run_without_its_sensor_keeps_retrying_and_still_stops_cleanly() {
+    let dir = TempDir::new("run-nosensor");
+    let config = dir.join("clsmap.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[sensor]\nport = \"/dev/clsmap-test-no-such-port\"\nretry_initial = 0.2\nretry_max = 0.4\n\
+             [daemon]\nstate_dir = {:?}\n",
+            dir.join("state").display().to_string()
+        ),
+    )
+    .unwrap();
+    let mut daemon = Daemon::start(&config);
+    daemon.wait_for("clsmap-test-no-such-port", Duration::from_secs(30));
+    daemon.wait_for("trying again", Duration::from_secs(5));
+    // Retried, not given up: more failures come after the back-off.
+    std::thread::sleep(Duration::from_millis(800));
+    daemon.signal("TERM");
+    let (status, _, stderr) = daemon.finish(Duration::from_secs(30));
+    assert!(status.success(), "{status}\n{stderr}");
+    assert!(
+        stderr.matches("trying again").count() >= 2,
+        "expected retries:\n{stderr}"
+    );
+    // An empty map is still a valid map file.
+    let run = run_dir(&dir.join("state"));
+    let map = clsmap::map::cls::ClsMap::load(
+        &run.join("map.json"),
+        clsmap::map::cls::ClsMapConfig::default(),
+    )
+    .unwrap();
+    assert_eq!(map.actual_segments().count(), 0);
+}
+
+#[test]
+fn run_refuses_a_bad_config_naming_the_key_and_line() {
+    let dir = TempDir::new("run-badconfig");
+    let config = dir.join("clsmap.toml");
+    std::fs::write(&config, "# robot\n[base]\nmax_speed = -1.0\n").unwrap();
+    let run = clsmap(&["run", "--config", arg(&config)]);
+    assert!(!run.status.success(), "{run}");
+    assert!(run.stderr.contains("base.max_speed (line 3)"), "{run}");
+    std::fs::write(&config, "[sensor]\nprot = \"/dev/ttyUSB0\"\n").unwrap();
+    let run = clsmap(&["run", "--config", arg(&config)]);
+    assert!(!run.status.success(), "{run}");
+    assert!(
+        run.stderr.contains("prot") && run.stderr.contains("line 2"),
+        "{run}"
+    );
+    let run = clsmap(&["run", "--config", arg(&dir.join("missing.toml"))]);
+    assert!(
+        !run.status.success() && run.stderr.contains("missing.toml"),
+        "{run}"
+    );
+}

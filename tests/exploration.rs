@@ -20,7 +20,7 @@ use clsmap::explore::{
 };
 use clsmap::geometry::{ExtractionConfig, Pose2, extract_lines};
 use clsmap::map::cls::{ClsLoop, ClsMap, ClsMapConfig, ClsSegment, ClsShape, SegmentMode, picture};
-use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
+use clsmap::sim::{Rng, ScanSpec, World, WorldFile, cast_scan};
 use common::point_segment_distance;
 use proptest::prelude::*;
 
@@ -312,6 +312,20 @@ fn explores_the_loop_around_a_block() {
         7,
     );
     explore("loop-b", &world, Pose2::new(6.0, 9.0, 0.0), 8);
+}
+
+#[test]
+fn explores_the_paper_lab() {
+    let lab = WorldFile::builtin("lab").unwrap();
+    explore("lab", &lab.world, lab.start, 7);
+    explore("lab-b", &lab.world, Pose2::new(8.0, 4.0, 3.0), 8);
+}
+
+#[test]
+fn explores_the_corridor_with_rooms() {
+    let office = WorldFile::builtin("office").unwrap();
+    explore("office", &office.world, office.start, 7);
+    explore("office-b", &office.world, Pose2::new(10.0, 0.0, 0.0), 8);
 }
 
 // ---------------------------------------------------------------------

@@ -4,64 +4,84 @@ use std::path::Path;
 use std::process::ExitCode;
 
 use anyhow::{Context as _, bail};
-use clsmap::demo::{DemoOptions, DemoProgress, Scenario, run_demo};
+use clsmap::demo::{DemoProgress, demo_config, run_demo};
 use indicatif::{ProgressBar, ProgressStyle};
 
-pub fn demo(out: &Path, seed: u64, speed: f64) -> anyhow::Result<ExitCode> {
-    if !(speed.is_finite() && speed > 0.0 && speed <= 3.0) {
-        bail!("--speed {speed}: the simulated base drives at more than 0 and at most 3 m/s");
+pub fn demo(out: &Path, world: Option<&str>, seed: Option<u64>) -> anyhow::Result<ExitCode> {
+    let mut config = demo_config().context("the built-in demo configuration is invalid")?;
+    if let Some(w) = world {
+        config.sim.world = w.to_string();
     }
-    let scenario = Scenario::loop_around_block(speed);
-    let options = DemoOptions {
-        seed,
-        ..DemoOptions::new(out)
-    };
+    if let Some(s) = seed {
+        config.sim.seed = s;
+    }
+    if out.join(clsmap::pipeline::MAP_FILE).exists() {
+        bail!(
+            "{} already holds a map; choose another --out (the demo never overwrites a map)",
+            out.display()
+        );
+    }
     println!(
-        "clsmap demo: an emulated LMS200 on a pseudo-terminal, streaming 180°/0.5° at 500 kBd,\n\
-         on a holonomic base driving {:.0} s through \"{}\"; mapping live.",
-        scenario.tour.duration(),
-        scenario.name
+        "clsmap demo: an emulated LMS200 on a pseudo-terminal (180°/0.5°, 500 kBd) on a simulated\n\
+         holonomic base in the \"{}\" world; the daemon's loop localizes every scan, grows the\n\
+         CLS map and explores by Virtual Line Segment Pursuit until no frontier is left.",
+        config.sim.world
     );
-    let bar = ProgressBar::new(1000).with_style(
-        ProgressStyle::with_template("{spinner} [{bar:30}] {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
+    let bar = ProgressBar::new_spinner().with_style(
+        ProgressStyle::with_template("{spinner} {elapsed_precise} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_spinner()),
     );
+    bar.enable_steady_tick(std::time::Duration::from_millis(200));
     let on_progress = |p: &DemoProgress| {
-        if p.tour_duration > 0.0 {
-            bar.set_position((1000.0 * (p.t / p.tour_duration).clamp(0.0, 1.0)) as u64);
-        }
         bar.set_message(format!(
-            "{:5.1} s  {:4} scans  {:3} segments  pose error {:.3} m (odometry alone {:.3} m)",
-            p.t, p.scans, p.segments, p.error, p.odometry_error
+            "{:5} scans  {:3} walls  {:3} frontiers  goal {:2}  pose error {:.3} m",
+            p.scans, p.walls, p.frontiers, p.goals, p.error
         ));
     };
-    let result = run_demo(&scenario, &options, on_progress);
+    let result = run_demo(config, out, on_progress);
     bar.finish_and_clear();
     let s = result.context("the demo failed")?;
     println!(
-        "mapped {} scans at {} Bd ({} telegrams dropped on the line)",
+        "{} after {:.0} s: {} goals, {:.1} m driven, {} scans mapped ({} skipped while busy)",
+        if s.exploration_complete {
+            "exploration complete"
+        } else {
+            "stopped before exploration completed"
+        },
+        s.run_time_s,
+        s.goals,
+        s.driven_m,
         s.scans,
-        s.connected_baud
-            .map_or_else(|| "?".into(), |b| b.to_string()),
-        s.dropped_frames
+        s.scans_skipped
     );
     println!(
-        "CLS map: {} actual + {} virtual segments in {} loops",
-        s.cls_actual, s.cls_virtual, s.cls_loops
+        "CLS map: {} walls + {} frontiers in {} loops; {:.1} % of the wall length within 5 cm of the world's walls",
+        s.walls,
+        s.frontiers,
+        s.loops,
+        100.0 * s.walls_on_world
     );
     println!(
-        "pose error against the simulator's truth: mean {:.3} m, max {:.3} m, max heading {:.2}°; \
-         final {:.3} m (odometry alone: {:.3} m)",
-        s.mean_error_m,
-        s.max_error_m,
-        s.max_heading_error_deg,
-        s.final_error_m,
-        s.odometry_final_error_m
+        "pose error against the simulator's truth: mean {:.3} m, max {:.3} m, max heading {:.2}°",
+        s.mean_error_m, s.max_error_m, s.max_heading_error_deg
     );
+    if let Some(l) = s
+        .latencies
+        .iter()
+        .find(|l| l.stage == clsmap::daemon::Stage::Pose)
+    {
+        println!(
+            "last telegram byte to corrected pose: p50 {} µs, p99 {} µs, max {} µs",
+            l.p50_us, l.p99_us, l.max_us
+        );
+    }
     println!(
         "wrote {}/{{map.json, map.svg, segments.json, trajectory.tum, demo.json}}",
         s.out_dir.display()
     );
-    Ok(ExitCode::SUCCESS)
+    Ok(if s.exploration_complete {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    })
 }

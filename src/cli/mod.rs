@@ -9,6 +9,7 @@ use std::sync::atomic::AtomicBool;
 use anyhow::Context as _;
 use clap::{Parser, Subcommand, ValueEnum};
 
+mod daemon;
 mod demo;
 mod localize;
 mod mapping;
@@ -30,20 +31,32 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// The embedded default: an emulated LMS200 on a pseudo-terminal and a
-    /// simulated holonomic base in a built-in floor plan, mapped live
-    /// through the real serial driver; writes the map, its picture and the
-    /// trajectory.
+    /// The embedded default: the daemon on a simulated robot. An emulated
+    /// LMS200 on a pseudo-terminal and a simulated holonomic base in a
+    /// built-in floor plan; the loop localizes, maps and explores by
+    /// Virtual Line Segment Pursuit until no frontier is left, then writes
+    /// the map, its picture and the trajectory.
     Demo {
-        /// Where to write map.json, map.svg, trajectory.tum, demo.json.
+        /// Where to write map.json, map.svg, trajectory.tum, demo.json
+        /// (must not hold a map already).
         #[arg(long, default_value = "out/demo")]
         out: PathBuf,
-        /// Seed of the simulated range noise and odometry errors.
-        #[arg(long, default_value_t = 7)]
-        seed: u64,
-        /// Driving speed of the simulated base (m/s).
-        #[arg(long, default_value_t = 1.0)]
-        speed: f64,
+        /// Built-in world (loop, room, corridor, lab, office) or a world
+        /// file; default: config/demo.toml's.
+        #[arg(long)]
+        world: Option<String>,
+        /// Seed of the simulated range noise.
+        #[arg(long)]
+        seed: Option<u64>,
+    },
+    /// The robot daemon: the LMS200, the base, localization, the CLS map
+    /// and exploration in one real-time loop (systemd `Type=notify`).
+    /// SIGTERM/SIGINT stop the base and the sensor and save the map;
+    /// SIGHUP reloads the tunable parts of the configuration.
+    Run {
+        /// Daemon configuration (TOML); every key and default is in config/clsmap.toml.
+        #[arg(long)]
+        config: PathBuf,
     },
     /// Find an LMS200 on a serial port: line speed, type, firmware, variant, units.
     Probe {
@@ -189,7 +202,8 @@ impl Cli {
     }
 }
 
-/// Logs to stderr; RUST_LOG, if set, wins over -v/-q.
+/// Logs to stderr; RUST_LOG or else CLSMAP_LOG (the systemd unit's), if
+/// set, wins over -v/-q.
 pub fn init_logging(verbose: u8, quiet: bool) {
     let default = match (quiet, verbose) {
         (true, _) => "warn",
@@ -198,6 +212,7 @@ pub fn init_logging(verbose: u8, quiet: bool) {
         _ => "trace",
     };
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .or_else(|_| tracing_subscriber::EnvFilter::try_from_env("CLSMAP_LOG"))
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
@@ -218,7 +233,8 @@ fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
 
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
-        Command::Demo { out, seed, speed } => demo::demo(&out, seed, speed),
+        Command::Demo { out, world, seed } => demo::demo(&out, world.as_deref(), seed),
+        Command::Run { config } => daemon::run_daemon(&config),
         Command::Probe { port } => sensor::probe(&port),
         Command::Record {
             port,

@@ -10,8 +10,12 @@
 //! - [`goal`]: the goal pose in front of a frontier.
 //! - [`memory`]: frontiers given up on, so none is chased forever.
 //! - [`pursuit`]: [`next_step`], the choice of the next frontier.
+//! - [`follow`]: [`PathFollower`], velocities along a path for a holonomic base.
+//! - [`explorer`]: [`Explorer`], the pursuit as a running behaviour.
 
 pub mod config;
+pub mod explorer;
+pub mod follow;
 pub mod free_space;
 pub mod goal;
 pub mod memory;
@@ -19,6 +23,8 @@ pub mod planner;
 pub mod pursuit;
 
 pub use config::{ExplorationConfig, XR4000_RADIUS};
+pub use explorer::{Explorer, ExplorerEvent, ExplorerStats};
+pub use follow::{DriveConfig, FollowStep, PathFollower};
 pub use free_space::{Corner, FreeSpace, FreeSpaceError};
 pub use goal::{Frontier, frontier_goal};
 pub use memory::ExplorationMemory;

@@ -169,6 +169,66 @@ fn to_array(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
     std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
 }
 
+/// `cov` with the translation's principal σ capped at `max_translation`
+/// (m) and the heading's σ at `max_rotation` (rad). Each cap is a
+/// congruence `A·cov·Aᵀ` that shrinks one direction only, so the result
+/// stays symmetric positive definite and correlations keep their sign.
+fn cap_covariance(cov: &Matrix3<f64>, max_translation: f64, max_rotation: f64) -> Matrix3<f64> {
+    let mut out = *cov;
+    let eig = cov.fixed_view::<2, 2>(0, 0).into_owned().symmetric_eigen();
+    let cap = max_translation * max_translation;
+    for k in 0..2 {
+        let lambda = eig.eigenvalues[k];
+        if lambda > cap {
+            let u = Vector3::new(eig.eigenvectors[(0, k)], eig.eigenvectors[(1, k)], 0.0);
+            let a = Matrix3::identity() - (1.0 - (cap / lambda).sqrt()) * u * u.transpose();
+            out = a * out * a.transpose();
+        }
+    }
+    let rot_cap = max_rotation * max_rotation;
+    if out[(2, 2)] > rot_cap {
+        let a = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, (rot_cap / out[(2, 2)]).sqrt()));
+        out = a * out * a.transpose();
+    }
+    out
+}
+
+#[cfg(test)]
+mod cap_tests {
+    use super::*;
+
+    #[test]
+    fn wide_directions_are_capped_and_the_rest_kept() {
+        // 100 m² along a corridor at 30°, 1 cm² across, some heading.
+        let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+        let r = nalgebra::Matrix2::new(c, -s, s, c);
+        let t = r * nalgebra::Matrix2::new(100.0, 0.0, 0.0, 1e-4) * r.transpose();
+        let mut cov = Matrix3::zeros();
+        cov.fixed_view_mut::<2, 2>(0, 0).copy_from(&t);
+        cov[(2, 2)] = 1e-4;
+        cov[(0, 2)] = 5e-5;
+        cov[(2, 0)] = 5e-5;
+        assert!(cov.cholesky().is_some());
+        let capped = cap_covariance(&cov, 0.5, 0.35);
+        let eig = capped
+            .fixed_view::<2, 2>(0, 0)
+            .into_owned()
+            .symmetric_eigen();
+        let (hi, lo) = (eig.eigenvalues.max(), eig.eigenvalues.min());
+        assert!(
+            (hi - 0.25).abs() < 1e-9 && (lo - 1e-4).abs() < 1e-9,
+            "{eig:?}"
+        );
+        assert!((capped[(2, 2)] - 1e-4).abs() < 1e-12);
+        assert!(capped.cholesky().is_some(), "still positive definite");
+        // A covariance within the caps is returned unchanged.
+        let small = Matrix3::from_diagonal(&Vector3::new(0.01, 0.02, 0.001));
+        assert_eq!(cap_covariance(&small, 0.5, 0.35), small);
+        let spun = Matrix3::from_diagonal(&Vector3::new(0.01, 0.02, 4.0));
+        assert!((cap_covariance(&spun, 0.5, 0.35)[(2, 2)] - 0.1225).abs() < 1e-12);
+    }
+}
+
 /// Information matrix of the prior, checked.
 fn prior_information(prior: &[[f64; 3]; 3]) -> Result<Matrix3<f64>, LocalizeError> {
     let p = to_matrix(prior);
@@ -248,6 +308,11 @@ pub fn localize(
     if cfg.scale_covariance_by_residual && dof > 0 {
         covariance *= (lines.chi2 / dof as f64).max(1.0);
     }
+    // No wider than the jumps the localizer accepts: along an unobservable
+    // direction the covariance is the prior's, inflated on every scan, and
+    // in a long corridor it grew to 100 m² within a minute; the next
+    // prediction's correspondence gate then let walls 10 m away match.
+    let covariance = cap_covariance(&covariance, cfg.max_translation_jump, cfg.max_rotation_jump);
 
     let dx = (pose.x - predicted.x).hypot(pose.y - predicted.y);
     let dtheta = wrap_angle(pose.theta - predicted.theta).abs();

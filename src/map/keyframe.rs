@@ -46,6 +46,11 @@ impl KeyframePolicy {
         KeyframePolicy { config, last: None }
     }
 
+    /// Takes new thresholds; the last keyframe stays the reference.
+    pub fn retune(&mut self, config: KeyframeConfig) {
+        self.config = config;
+    }
+
     /// Whether a scan taken at `pose` (map frame) should update the map;
     /// if so it becomes the reference for the next decision.
     pub fn is_keyframe(&mut self, pose: &Pose2) -> bool {

@@ -47,6 +47,10 @@ pub struct OdometryFeed {
     /// Time of the first moving sample after a freeze: interpolation
     /// before it spreads the lumped jump.
     lump_until: Option<f64>,
+    /// Whether a sample equal to the previous one means the robot stood
+    /// still (a live base whose samples carry their own times) rather than
+    /// frozen odometry (a log's repeated value).
+    unchanged_is_standstill: bool,
 }
 
 impl OdometryFeed {
@@ -60,12 +64,19 @@ impl OdometryFeed {
         }
     }
 
+    /// Takes an unchanged sample as standing still, not as frozen
+    /// odometry: right for a live base polled for fresh, timestamped
+    /// samples (a stream that stops delivering gives no reading at all).
+    pub fn trust_unchanged(&mut self, yes: bool) {
+        self.unchanged_is_standstill = yes;
+    }
+
     /// The reading for a scan at `t` (s) whose record carries `raw`.
     pub fn reading(&mut self, t: f64, raw: Option<Pose2>) -> OdometryReading {
         let Some(raw) = raw else {
             return OdometryReading::Stale;
         };
-        if self.last_raw == Some(raw) {
+        if self.last_raw == Some(raw) && !self.unchanged_is_standstill {
             self.in_gap = true;
             return OdometryReading::Stale;
         }

@@ -1,5 +1,6 @@
 //! The simulated world as the LMS200 emulator's range source: the emulated
-//! sensor rides on a [`Tour`] and measures by ray casting.
+//! sensor rides on whatever carries it (a scripted [`Tour`] or a simulated
+//! robot driven by the daemon, see [`Carrier`]) and measures by ray casting.
 
 use lms200::emulator::RangeSource;
 
@@ -8,11 +9,25 @@ use super::tour::Tour;
 use super::world::World;
 use crate::geometry::Pose2;
 
-/// Ranges for the emulator from a world, a tour and a laser mounting pose.
+/// Where the robot carrying the sensor truly is at a time.
+pub trait Carrier: Send {
+    /// The robot's true pose (world frame, m and rad) at `t` seconds on the
+    /// emulator's clock.
+    fn pose_at(&mut self, t: f64) -> Pose2;
+}
+
+impl Carrier for Tour {
+    fn pose_at(&mut self, t: f64) -> Pose2 {
+        Tour::pose_at(self, t)
+    }
+}
+
+/// Ranges for the emulator from a world, the robot carrying the sensor and
+/// the laser's mounting pose on it.
 #[derive(Debug)]
-pub struct WorldRangeSource {
+pub struct WorldRangeSource<C = Tour> {
     world: World,
-    tour: Tour,
+    carrier: C,
     /// Laser pose in the robot frame.
     mount: Pose2,
     /// Largest range the sensor reports (m); beyond it, no echo.
@@ -22,10 +37,10 @@ pub struct WorldRangeSource {
     rng: Rng,
 }
 
-impl WorldRangeSource {
+impl<C: Carrier> WorldRangeSource<C> {
     pub fn new(
         world: World,
-        tour: Tour,
+        carrier: C,
         mount: Pose2,
         max_range: f64,
         range_sigma: f64,
@@ -33,7 +48,7 @@ impl WorldRangeSource {
     ) -> Self {
         WorldRangeSource {
             world,
-            tour,
+            carrier,
             mount,
             max_range,
             range_sigma,
@@ -42,9 +57,9 @@ impl WorldRangeSource {
     }
 }
 
-impl RangeSource for WorldRangeSource {
+impl<C: Carrier> RangeSource for WorldRangeSource<C> {
     fn ranges_m(&mut self, time_s: f64, beam_angles_rad: &[f64]) -> Vec<f64> {
-        let sensor = self.tour.pose_at(time_s).compose(&self.mount);
+        let sensor = self.carrier.pose_at(time_s).compose(&self.mount);
         beam_angles_rad
             .iter()
             .map(|a| {

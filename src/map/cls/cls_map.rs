@@ -275,38 +275,36 @@ impl ClsMap {
         };
         let (whole, crossing): (Vec<&ClsLoop>, Vec<&ClsLoop>) =
             near.iter().partition(|l| inside(l));
-        let windowed = if crossing.is_empty() || !self.config.clip_to_window {
-            None
-        } else {
-            self.windowed_union(local, lines, pose, pose_cov, &whole, &crossing, window_box)?
-        };
-        let (mut new_shapes, mut stats) = match windowed {
+        // The windowed union first when long loops cross the window; if it
+        // meets a degenerate case or its result would break an invariant
+        // of the map, the union of the whole touched loops.
+        let try_window = !crossing.is_empty() && self.config.clip_to_window;
+        let mut result = None;
+        if try_window
+            && let Some((shapes, stats)) =
+                self.windowed_union(local, lines, pose, pose_cov, &whole, &crossing, window_box)?
+        {
+            let committed = self.with_far_holes(shapes, &far_holes)?;
+            if self.check_candidate(&touched, &committed).is_ok() {
+                result = Some((committed, stats));
+            }
+        }
+        let (new_shapes, mut stats) = match result {
             Some(done) => done,
             None => {
                 let mut table = LineTable::default();
                 let subject = whole_contours(&near, &mut table);
                 let mut stats = ClsUpdateStats::default();
-                let result = self.merge_local(
+                let merged = self.merge_local(
                     subject, &mut table, local, lines, pose, pose_cov, &mut stats,
                 )?;
-                let shapes = to_shapes(&result, &table);
-                (shapes, stats)
+                let committed = self.with_far_holes(to_shapes(&merged, &table), &far_holes)?;
+                // Refuse the update whole rather than keep an invalid map.
+                self.check_candidate(&touched, &committed)?;
+                (committed, stats)
             }
         };
         stats.touched_shapes = touched.len();
-        for hole in far_holes {
-            let probe = hole.segments().first().map(|s| s.point_on_left(1e-6));
-            let owner = match new_shapes.len() {
-                1 => Some(0),
-                _ => probe.and_then(|p| new_shapes.iter().position(|s| s.outer.encloses(p))),
-            };
-            match owner.and_then(|k| new_shapes.get_mut(k)) {
-                Some(shape) => shape.holes.push(hole),
-                // Cannot happen for a valid map (the union only grows the
-                // free space around the hole); refuse rather than lose it.
-                None => return Err(ClsError::LostHole),
-            }
-        }
         for &i in touched.iter().rev() {
             self.shapes.swap_remove(i);
             self.bounds.swap_remove(i);
@@ -317,6 +315,45 @@ impl ClsMap {
         }
         debug_assert_eq!(self.check_invariants(), Ok(()));
         Ok(stats)
+    }
+
+    /// Hands each far hole back to the new shape that encloses it.
+    fn with_far_holes(
+        &self,
+        mut new_shapes: Vec<ClsShape>,
+        far_holes: &[ClsLoop],
+    ) -> Result<Vec<ClsShape>, ClsError> {
+        for hole in far_holes {
+            let probe = hole.segments().first().map(|s| s.point_on_left(1e-6));
+            let owner = match new_shapes.len() {
+                1 => Some(0),
+                _ => probe.and_then(|p| new_shapes.iter().position(|s| s.outer.encloses(p))),
+            };
+            match owner.and_then(|k| new_shapes.get_mut(k)) {
+                Some(shape) => shape.holes.push(hole.clone()),
+                // Cannot happen for a valid map (the union only grows the
+                // free space around the hole); refuse rather than lose it.
+                None => return Err(ClsError::LostHole),
+            }
+        }
+        Ok(new_shapes)
+    }
+
+    /// Checks the map the update would leave: the untouched shapes and
+    /// `new_shapes` together (about O(n log n), a few tens of µs for a
+    /// thousand segments; once per keyframe).
+    fn check_candidate(
+        &self,
+        touched: &[usize],
+        new_shapes: &[ClsShape],
+    ) -> Result<(), InvariantError> {
+        let untouched = self
+            .shapes
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !touched.contains(i))
+            .map(|(_, s)| s);
+        check_loops(untouched.chain(new_shapes))
     }
 
     /// The union with the crossing loops clipped to the window; `None` if

@@ -263,7 +263,9 @@ pub enum InvariantError {
 type SweepEntry = (usize, usize, [f64; 2], [f64; 2], usize);
 
 /// Checks every invariant of the module documentation.
-pub fn check_loops(shapes: &[ClsShape]) -> Result<(), InvariantError> {
+pub fn check_loops<'a>(
+    shapes: impl IntoIterator<Item = &'a ClsShape>,
+) -> Result<(), InvariantError> {
     let mut all: Vec<SweepEntry> = Vec::new();
     let mut loop_index = 0;
     for shape in shapes {

@@ -1,0 +1,610 @@
+//! [`DaemonConfig`]: the TOML file `clsmap run --config FILE` reads.
+//!
+//! Every key, its default and its unit is documented in
+//! `config/clsmap.toml` (a test keeps that file equal to the defaults).
+//! Unknown keys and wrong types are refused by serde with the line and
+//! column; values out of range are refused by [`DaemonConfig::validate`]
+//! with the key and, when the file names it, its line.
+
+use std::path::{Path, PathBuf};
+
+use clsmap_base::Limits;
+use lms200::link::LinkConfig;
+use lms200::{Baud, Units, Variant};
+use serde::{Deserialize, Serialize};
+
+use crate::explore::{DriveConfig, ExplorationConfig};
+use crate::geometry::Pose2;
+use crate::mapping_config::MapperConfig;
+
+/// Everything the daemon needs.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DaemonConfig {
+    pub sensor: SensorConfig,
+    pub base: BaseConfig,
+    pub sim: SimConfig,
+    pub exploration: ExplorationSection,
+    pub daemon: LoopConfig,
+    pub mapper: MapperConfig,
+}
+
+/// Where the scans come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SensorSource {
+    /// A real LMS200 on `port`.
+    Serial,
+    /// The built-in LMS200 emulator on a pseudo-terminal, measuring the
+    /// `[sim]` world from the simulated robot (needs `base.adapter = "sim"`).
+    Emulator,
+}
+
+/// `[sensor]`: the LMS200 and its serial line.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SensorConfig {
+    pub source: SensorSource,
+    /// Serial device (default /dev/lms200, the udev rule's name).
+    pub port: PathBuf,
+    /// Line speed while streaming (Bd): 9600, 19200, 38400 or 500000
+    /// (default 500000: 75 scans/s at 180°/0.5°; RS-422 only).
+    pub baud: u32,
+    /// Field of view (deg): 100 or 180 (default 180).
+    pub field_of_view: u16,
+    /// Angular resolution (deg): 0.25 (100° only), 0.5 or 1 (default 0.5).
+    pub resolution: f64,
+    /// Range units: "mm" (8.183 m range, default) or "cm" (81.83 m).
+    pub units: String,
+    /// No scan for this long (s) stops the base until scans return
+    /// (default 0.5 s: about 37 missed scans at 75 scans/s).
+    pub silence_stop: f64,
+    /// First and longest wait (s) before opening the port again after it
+    /// failed (unplugged, busy); the wait doubles in between (default 1 s
+    /// and 30 s).
+    pub retry_initial: f64,
+    pub retry_max: f64,
+    /// Record the raw telegram stream here (a new file per connection; an
+    /// existing one is never overwritten). Default: no recording.
+    pub record: Option<PathBuf>,
+}
+
+impl Default for SensorConfig {
+    fn default() -> Self {
+        SensorConfig {
+            source: SensorSource::Serial,
+            port: PathBuf::from("/dev/lms200"),
+            baud: 500_000,
+            field_of_view: 180,
+            resolution: 0.5,
+            units: "mm".into(),
+            silence_stop: 0.5,
+            retry_initial: 1.0,
+            retry_max: 30.0,
+            record: None,
+        }
+    }
+}
+
+/// Which base adapter drives the robot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BaseKind {
+    /// The simulated holonomic base of `[sim]`.
+    Sim,
+    /// A real base bridged by the line protocol over TCP (`address`).
+    Tcp,
+    /// A real base bridged by the line protocol over a serial port.
+    Serial,
+    /// Odometry replayed from a recording or CARMEN log (`replay`); the
+    /// robot cannot be driven.
+    Replay,
+    /// No base: no odometry, no motion; mapping from scans alone.
+    None,
+}
+
+/// `[base]`: the mobile base and its limits.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BaseConfig {
+    pub adapter: BaseKind,
+    /// `tcp`: host:port of the bridge (default 127.0.0.1:7300).
+    pub address: String,
+    /// `serial`: device and line speed of the bridge (default
+    /// /dev/xr4000, 115200 Bd).
+    pub port: PathBuf,
+    pub baud: u32,
+    /// `replay`: the recording or CARMEN log whose odometry is played.
+    pub replay: Option<PathBuf>,
+    /// Odometry polls and velocity commands per second (default 50 Hz).
+    pub rate: f64,
+    /// Odometry older than this (s) stops the base (default 0.5 s).
+    pub stale_odometry: f64,
+    /// Speed and acceleration limits applied to every command (m/s, rad/s,
+    /// m/s², rad/s²; defaults: conservative XR4000 assumptions).
+    pub max_speed: f64,
+    pub max_turn_rate: f64,
+    pub max_acceleration: f64,
+    pub max_angular_acceleration: f64,
+}
+
+impl Default for BaseConfig {
+    fn default() -> Self {
+        let limits = Limits::default();
+        BaseConfig {
+            adapter: BaseKind::None,
+            address: "127.0.0.1:7300".into(),
+            port: PathBuf::from("/dev/xr4000"),
+            baud: 115_200,
+            replay: None,
+            rate: 50.0,
+            stale_odometry: 0.5,
+            max_speed: limits.max_linear,
+            max_turn_rate: limits.max_angular,
+            max_acceleration: limits.max_linear_accel,
+            max_angular_acceleration: limits.max_angular_accel,
+        }
+    }
+}
+
+impl BaseConfig {
+    pub fn limits(&self) -> Limits {
+        Limits {
+            max_linear: self.max_speed,
+            max_angular: self.max_turn_rate,
+            max_linear_accel: self.max_acceleration,
+            max_angular_accel: self.max_angular_acceleration,
+        }
+    }
+}
+
+/// `[sim]`: the simulated world, robot and sensor.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimConfig {
+    /// A built-in world ("loop", "room", "corridor", "lab", "office") or
+    /// the path of a world file (default "loop").
+    pub world: String,
+    /// Where the robot starts (world frame, m and rad); default: the
+    /// world's own start.
+    pub start: Option<Pose2>,
+    /// Range noise of the emulated LMS200 (m; default 0.01, its σ).
+    pub range_sigma: f64,
+    /// Odometry scale error (fraction of distance; default 0.02).
+    pub odometry_scale_error: f64,
+    /// Odometry heading drift (rad per metre; default 0.01).
+    pub odometry_heading_drift: f64,
+    /// Seed of the range noise (default 7).
+    pub seed: u64,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        SimConfig {
+            world: "loop".into(),
+            start: None,
+            range_sigma: 0.01,
+            odometry_scale_error: 0.02,
+            odometry_heading_drift: 0.01,
+            seed: 7,
+        }
+    }
+}
+
+/// `[exploration]`: Virtual Line Segment Pursuit.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ExplorationSection {
+    /// Drive the base to frontiers (default false: map where the robot is
+    /// driven by someone else).
+    pub enabled: bool,
+    /// Save the map and exit 0 once exploration is complete (default
+    /// false: keep localizing and mapping).
+    pub exit_when_complete: bool,
+    /// `[exploration.planner]`: frontier choice and clearance.
+    pub planner: ExplorationConfig,
+    /// `[exploration.drive]`: path following.
+    pub drive: DriveConfig,
+}
+
+/// `[daemon]`: state, checkpoints, reporting.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LoopConfig {
+    /// Where maps go; each run writes into a new `run-<UTC time>`
+    /// directory below it, so no earlier map is ever overwritten. Default:
+    /// `$STATE_DIRECTORY` (set by systemd's `StateDirectory=`), else
+    /// `./clsmap-state`.
+    pub state_dir: Option<PathBuf>,
+    /// Seconds between map checkpoints (default 30 s; 0 = only at exit).
+    pub checkpoint_interval: f64,
+    /// Seconds between status lines in the log (default 10 s).
+    pub status_interval: f64,
+    /// Stop after this many seconds, saving the map (default 0 = never).
+    pub max_run_time: f64,
+}
+
+impl Default for LoopConfig {
+    fn default() -> Self {
+        LoopConfig {
+            state_dir: None,
+            checkpoint_interval: 30.0,
+            status_interval: 10.0,
+            max_run_time: 0.0,
+        }
+    }
+}
+
+/// Why a configuration was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum DaemonConfigError {
+    #[error("cannot read {path}")]
+    Read {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Not TOML, an unknown key, a wrong type: toml's message names the
+    /// line and column.
+    #[error("{0}")]
+    Syntax(#[from] toml::de::Error),
+    #[error("{key}{}: {value} is out of range (must be {rule})", line.map(|l| format!(" (line {l})")).unwrap_or_default())]
+    Range {
+        key: String,
+        line: Option<usize>,
+        value: String,
+        rule: String,
+    },
+    #[error("{key}{}: {reason}", line.map(|l| format!(" (line {l})")).unwrap_or_default())]
+    Invalid {
+        key: String,
+        line: Option<usize>,
+        reason: String,
+    },
+}
+
+impl DaemonConfig {
+    /// Reads and checks a configuration file.
+    pub fn load(path: &Path) -> Result<DaemonConfig, DaemonConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| DaemonConfigError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        DaemonConfig::from_toml(&text)
+    }
+
+    /// Parses and checks a TOML document.
+    pub fn from_toml(text: &str) -> Result<DaemonConfig, DaemonConfigError> {
+        let config: DaemonConfig = toml::from_str(text)?;
+        config.validate(Some(text))?;
+        Ok(config)
+    }
+
+    /// Checks every value; `source`, the TOML text, lets errors name lines.
+    pub fn validate(&self, source: Option<&str>) -> Result<(), DaemonConfigError> {
+        let locate = |key: &str| source.and_then(|text| line_of_key(text, key));
+        let range = |key: &str, value: String, rule: &str| DaemonConfigError::Range {
+            key: key.to_string(),
+            line: locate(key),
+            value,
+            rule: rule.to_string(),
+        };
+        let positive = |key: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(range(key, v.to_string(), "> 0"))
+            }
+        };
+        let non_negative = |key: &str, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(range(key, v.to_string(), ">= 0"))
+            }
+        };
+        let s = &self.sensor;
+        if Baud::from_bits_per_second(s.baud).is_none() {
+            return Err(range(
+                "sensor.baud",
+                s.baud.to_string(),
+                "9600, 19200, 38400 or 500000",
+            ));
+        }
+        if self.variant().is_none() {
+            return Err(DaemonConfigError::Invalid {
+                key: "sensor.resolution".into(),
+                line: locate("sensor.resolution").or_else(|| locate("sensor.field_of_view")),
+                reason: format!(
+                    "{}° at {}° is not an LMS200 variant (180° at 0.5° or 1°, 100° at 0.25°, 0.5° or 1°)",
+                    s.field_of_view, s.resolution
+                ),
+            });
+        }
+        if self.units().is_none() {
+            return Err(range(
+                "sensor.units",
+                format!("{:?}", s.units),
+                "\"mm\" or \"cm\"",
+            ));
+        }
+        positive("sensor.silence_stop", s.silence_stop)?;
+        positive("sensor.retry_initial", s.retry_initial)?;
+        positive("sensor.retry_max", s.retry_max)?;
+        if s.retry_max < s.retry_initial {
+            return Err(range(
+                "sensor.retry_max",
+                s.retry_max.to_string(),
+                ">= sensor.retry_initial",
+            ));
+        }
+        let b = &self.base;
+        positive("base.rate", b.rate)?;
+        if b.rate > 1000.0 {
+            return Err(range("base.rate", b.rate.to_string(), "<= 1000 Hz"));
+        }
+        positive("base.stale_odometry", b.stale_odometry)?;
+        positive("base.max_speed", b.max_speed)?;
+        positive("base.max_turn_rate", b.max_turn_rate)?;
+        positive("base.max_acceleration", b.max_acceleration)?;
+        positive("base.max_angular_acceleration", b.max_angular_acceleration)?;
+        if b.adapter == BaseKind::Replay && b.replay.is_none() {
+            return Err(DaemonConfigError::Invalid {
+                key: "base.replay".into(),
+                line: locate("base.adapter"),
+                reason: "the replay adapter needs the log to replay".into(),
+            });
+        }
+        if s.source == SensorSource::Emulator && b.adapter != BaseKind::Sim {
+            return Err(DaemonConfigError::Invalid {
+                key: "sensor.source".into(),
+                line: locate("sensor.source"),
+                reason:
+                    "the emulated sensor rides on the simulated robot: set base.adapter = \"sim\""
+                        .into(),
+            });
+        }
+        let m = &self.sim;
+        non_negative("sim.range_sigma", m.range_sigma)?;
+        if !m.odometry_scale_error.is_finite() || m.odometry_scale_error.abs() >= 0.5 {
+            return Err(range(
+                "sim.odometry_scale_error",
+                m.odometry_scale_error.to_string(),
+                "in (-0.5, 0.5)",
+            ));
+        }
+        if !m.odometry_heading_drift.is_finite() {
+            return Err(range(
+                "sim.odometry_heading_drift",
+                m.odometry_heading_drift.to_string(),
+                "finite",
+            ));
+        }
+        if let Some(p) = m.start
+            && ![p.x, p.y, p.theta].iter().all(|v| v.is_finite())
+        {
+            return Err(range("sim.start", format!("{p:?}"), "finite"));
+        }
+        let e = &self.exploration;
+        if !e.planner.is_valid() {
+            return Err(DaemonConfigError::Invalid {
+                key: "exploration.planner".into(),
+                line: locate("exploration.planner"),
+                reason: "every length must be finite and >= 0, robot_radius and goal_standoff > 0"
+                    .into(),
+            });
+        }
+        if !e.drive.is_valid() {
+            return Err(DaemonConfigError::Invalid {
+                key: "exploration.drive".into(),
+                line: locate("exploration.drive"),
+                reason: "speeds, gains and timeout_factor must be > 0, the rest finite and >= 0"
+                    .into(),
+            });
+        }
+        if e.enabled && matches!(b.adapter, BaseKind::Replay | BaseKind::None) {
+            return Err(DaemonConfigError::Invalid {
+                key: "exploration.enabled".into(),
+                line: locate("exploration.enabled"),
+                reason: format!(
+                    "exploring needs a base that can be driven, not {:?}",
+                    b.adapter
+                ),
+            });
+        }
+        let d = &self.daemon;
+        non_negative("daemon.checkpoint_interval", d.checkpoint_interval)?;
+        positive("daemon.status_interval", d.status_interval)?;
+        non_negative("daemon.max_run_time", d.max_run_time)?;
+        self.mapper.validate().map_err(|e| {
+            let key = match &e {
+                crate::mapping_config::ConfigError::Range { key, .. } => mapper_key(key),
+                _ => "mapper".to_string(),
+            };
+            DaemonConfigError::Invalid {
+                line: locate(&key),
+                key,
+                reason: e.to_string(),
+            }
+        })
+    }
+
+    /// The LMS200 variant of `[sensor]`, if it is one.
+    pub fn variant(&self) -> Option<Variant> {
+        let centideg = (self.sensor.resolution * 100.0).round();
+        if !(1.0..=100.0).contains(&centideg)
+            || (self.sensor.resolution * 100.0 - centideg).abs() > 1e-6
+        {
+            return None;
+        }
+        Variant::from_wire(self.sensor.field_of_view, centideg as u16)
+    }
+
+    pub fn units(&self) -> Option<Units> {
+        match self.sensor.units.as_str() {
+            "mm" => Some(Units::Mm),
+            "cm" => Some(Units::Cm),
+            _ => None,
+        }
+    }
+
+    /// The serial link's configuration for `[sensor]` (defaults elsewhere).
+    pub fn link(&self) -> LinkConfig {
+        let mut link = LinkConfig::default();
+        if let Some(v) = self.variant() {
+            link.variant = v;
+        }
+        if let Some(u) = self.units() {
+            link.units = u;
+        }
+        if let Some(b) = Baud::from_bits_per_second(self.sensor.baud) {
+            link.target_baud = b;
+        }
+        link
+    }
+
+    /// The state directory: `[daemon] state_dir`, else `$STATE_DIRECTORY`
+    /// (its first entry), else `./clsmap-state`.
+    pub fn state_dir(&self) -> PathBuf {
+        if let Some(dir) = &self.daemon.state_dir {
+            return dir.clone();
+        }
+        std::env::var_os("STATE_DIRECTORY")
+            .and_then(|v| {
+                v.to_str()
+                    .and_then(|s| s.split(':').next())
+                    .filter(|s| !s.is_empty())
+                    .map(PathBuf::from)
+            })
+            .unwrap_or_else(|| PathBuf::from("clsmap-state"))
+    }
+}
+
+/// `[section] key` or `key` of a mapper error as a dotted key under
+/// `mapper`.
+fn mapper_key(key: &str) -> String {
+    match key.strip_prefix('[').and_then(|k| k.split_once("] ")) {
+        Some((section, name)) => format!("mapper.{section}.{name}"),
+        None => format!("mapper.{key}"),
+    }
+}
+
+/// The line (1-based) where the dotted `key` is written in the TOML
+/// `text`, or where its table is, if the key itself is not written.
+pub fn line_of_key(text: &str, key: &str) -> Option<usize> {
+    let doc = toml::de::DeTable::parse(text).ok()?;
+    let mut table = doc.get_ref();
+    let mut found = None;
+    let parts: Vec<&str> = key.split('.').collect();
+    for (i, part) in parts.iter().enumerate() {
+        let (k, v) = table.get_key_value(*part)?;
+        found = Some(k.span().start);
+        if i + 1 < parts.len() {
+            match v.get_ref() {
+                toml::de::DeValue::Table(t) => table = t,
+                _ => break,
+            }
+        }
+    }
+    found.map(|offset| text[..offset.min(text.len())].matches('\n').count() + 1)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_empty_file_is_the_defaults() {
+        let c = DaemonConfig::from_toml("").unwrap();
+        assert_eq!(c, DaemonConfig::default());
+        assert_eq!(c.variant(), Some(Variant::Fov180Res50));
+        assert_eq!(c.link().target_baud, Baud::B500000);
+    }
+
+    #[test]
+    fn bad_values_name_key_and_line() {
+        let text = "[sensor]\nport = \"/dev/ttyUSB0\"\nbaud = 57600\n";
+        let e = DaemonConfig::from_toml(text).unwrap_err().to_string();
+        assert!(
+            e.contains("sensor.baud (line 3)") && e.contains("57600"),
+            "{e}"
+        );
+        let text = "[base]\nadapter = \"sim\"\n\n[base.unknown]\n";
+        let e = DaemonConfig::from_toml(text).unwrap_err().to_string();
+        assert!(e.contains("line 4") || e.contains("unknown"), "{e}");
+        let text = "[sensor]\nfield_of_view = 100\nresolution = 0.3\n";
+        let e = DaemonConfig::from_toml(text).unwrap_err().to_string();
+        assert!(
+            e.contains("line 3") && e.contains("not an LMS200 variant"),
+            "{e}"
+        );
+        let text = "[mapper.extraction]\nsplit_threshold = -1.0\n";
+        let e = DaemonConfig::from_toml(text).unwrap_err().to_string();
+        assert!(
+            e.contains("mapper.extraction.split_threshold (line 2)"),
+            "{e}"
+        );
+        let text = "[sensor]\nsource = \"emulator\"\n";
+        let e = DaemonConfig::from_toml(text).unwrap_err().to_string();
+        assert!(e.contains("sensor.source (line 2)"), "{e}");
+        let text = "[exploration]\nenabled = true\n";
+        let e = DaemonConfig::from_toml(text).unwrap_err().to_string();
+        assert!(e.contains("exploration.enabled (line 2)"), "{e}");
+        let e = DaemonConfig::from_toml("[sensor]\nbaud = \"fast\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 2"), "{e}");
+    }
+
+    #[test]
+    fn keys_are_found_on_their_lines() {
+        let text = "# x\n[a]\nb = 1\n\n[a.c]\nd = 2\n";
+        assert_eq!(line_of_key(text, "a.b"), Some(3));
+        assert_eq!(line_of_key(text, "a.c.d"), Some(6));
+        assert_eq!(line_of_key(text, "a.c"), Some(5));
+        assert_eq!(line_of_key(text, "a.x"), None);
+        assert_eq!(line_of_key("not toml [", "a"), None);
+    }
+
+    /// `config/clsmap.toml` lists every key with its default: it must parse
+    /// to exactly the defaults and name every key; its `[mapper]` part is
+    /// `config/mapper.toml`'s.
+    #[test]
+    fn the_documented_config_is_the_default() {
+        let text = include_str!("../../config/clsmap.toml");
+        let parsed = DaemonConfig::from_toml(text).unwrap();
+        assert_eq!(parsed, DaemonConfig::default());
+        let defaults = toml::to_string(&DaemonConfig::default()).unwrap();
+        for line in defaults.lines() {
+            if let Some((key, _)) = line.split_once(" = ") {
+                assert!(
+                    text.lines().any(|l| {
+                        let l = l.trim_start().trim_start_matches("# ");
+                        l.starts_with(&format!("{key} =")) || l.starts_with(&format!("{key}="))
+                    }),
+                    "config/clsmap.toml does not document `{key}`"
+                );
+            }
+        }
+        // Keys with no default value (optional paths, the sim start) are
+        // documented as comments.
+        for key in ["record", "replay", "start", "state_dir"] {
+            assert!(
+                text.lines().any(|l| l.starts_with(&format!("# {key} ="))),
+                "config/clsmap.toml does not show `{key}`"
+            );
+        }
+        let mapper_toml: toml::Table =
+            toml::from_str(include_str!("../../config/mapper.toml")).unwrap();
+        let full: toml::Table = toml::from_str(text).unwrap();
+        assert_eq!(full.get("mapper"), Some(&toml::Value::Table(mapper_toml)));
+    }
+
+    #[test]
+    fn the_state_directory_prefers_the_config_then_systemd() {
+        let mut c = DaemonConfig::default();
+        c.daemon.state_dir = Some(PathBuf::from("/tmp/x"));
+        assert_eq!(c.state_dir(), PathBuf::from("/tmp/x"));
+    }
+}

@@ -1,0 +1,288 @@
+//! [`LiveMapper`]: the real-time loop's work, without the loop.
+//!
+//! Odometry samples and scans go in with their times (seconds on the
+//! daemon's monotonic clock); poses, map updates, velocity commands and
+//! latencies come out. No thread, no port, no clock of its own (it reads
+//! `Instant` only to time its stages), so the tokio daemon, the demo and a
+//! faster-than-real-time simulation all run the same code.
+
+use std::time::Duration;
+
+use clsmap_base::Twist;
+use serde::Serialize;
+use tracing::{info, info_span, warn};
+
+use super::latency::{Latencies, Stage};
+use crate::explore::{DriveConfig, ExplorationConfig, Explorer, ExplorerEvent, ExplorerStats};
+use crate::geometry::{Pose2, RangeScan};
+use crate::input::ScanRecord;
+use crate::input::odometry::OdometryTrack;
+use crate::mapping_config::MapperConfig;
+use crate::pipeline::{OfflineMapper, PipelineError, ScanOutcome, write_outputs};
+
+/// How far (s) odometry is extrapolated past its newest sample to a scan's
+/// time: bases report at 10–50 Hz, so a scan often lies up to one period
+/// beyond the newest sample; further than this the odometry counts as
+/// missing.
+const MAX_EXTRAPOLATION: f64 = 0.1;
+
+/// How much odometry history is kept (s): scans arrive a few tens of
+/// milliseconds after their mid-sweep time.
+const ODOMETRY_HISTORY: f64 = 2.0;
+
+/// A snapshot for the status line and `STATUS=`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LiveStatus {
+    pub scans: u64,
+    pub localized: u64,
+    pub keyframes: usize,
+    /// Actual and virtual segments and loops of the CLS map.
+    pub walls: usize,
+    pub frontiers: usize,
+    pub loops: usize,
+    pub pose: Option<Pose2>,
+    pub exploring: bool,
+    pub exploration_complete: bool,
+    pub explorer: Option<ExplorerStats>,
+}
+
+/// The mapper, the odometry buffer and the explorer of a running robot.
+#[derive(Debug)]
+pub struct LiveMapper {
+    mapper: OfflineMapper,
+    odometry: OdometryTrack,
+    explorer: Option<Explorer>,
+    latencies: Latencies,
+    scans: u64,
+    localized: u64,
+    /// The last scan's time, its pose (map frame) and the odometry then.
+    last_fix: Option<(f64, Pose2, Option<Pose2>)>,
+}
+
+impl LiveMapper {
+    /// A new map; with `exploration`, the robot explores from `now` (s).
+    pub fn new(
+        mapper: MapperConfig,
+        exploration: Option<(ExplorationConfig, DriveConfig)>,
+        now: f64,
+    ) -> LiveMapper {
+        let mut offline = OfflineMapper::new(mapper);
+        // Samples come from a base polled live, each with its own time: an
+        // unchanged pose is the robot standing still.
+        offline.trust_unchanged_odometry();
+        LiveMapper {
+            mapper: offline,
+            odometry: OdometryTrack::new(),
+            explorer: exploration.map(|(planner, drive)| Explorer::new(planner, drive, now)),
+            latencies: Latencies::new(),
+            scans: 0,
+            localized: 0,
+            last_fix: None,
+        }
+    }
+
+    pub fn mapper(&self) -> &OfflineMapper {
+        &self.mapper
+    }
+
+    pub fn latencies(&self) -> &Latencies {
+        &self.latencies
+    }
+
+    pub fn explorer(&self) -> Option<&Explorer> {
+        self.explorer.as_ref()
+    }
+
+    /// Takes the tunable parts of new configurations (SIGHUP); returns the
+    /// mapper keys that need a restart to change.
+    pub fn retune(
+        &mut self,
+        mapper: MapperConfig,
+        exploration: Option<(ExplorationConfig, DriveConfig)>,
+    ) -> Vec<&'static str> {
+        if let (Some(ex), Some((planner, drive))) = (self.explorer.as_mut(), exploration) {
+            ex.retune(planner, drive);
+        }
+        self.mapper.retune(mapper)
+    }
+
+    /// One odometry sample (t in s, pose in the odometry frame). Samples
+    /// older than the newest are refused (and counted by the caller).
+    pub fn on_odometry(&mut self, t: f64, pose: Pose2) -> bool {
+        if self.odometry.push(t, pose).is_err() {
+            return false;
+        }
+        self.odometry.discard_before(t - ODOMETRY_HISTORY);
+        true
+    }
+
+    /// Time of the newest odometry sample (s).
+    pub fn last_odometry_time(&self) -> Option<f64> {
+        self.odometry.last_time()
+    }
+
+    /// The odometry pose at `t`: interpolated, or extrapolated up to
+    /// [`MAX_EXTRAPOLATION`] past the newest sample.
+    pub fn odometry_at(&self, t: f64) -> Option<Pose2> {
+        let last = self.odometry.last_time()?;
+        if t <= last {
+            return self.odometry.at(t);
+        }
+        if t - last > MAX_EXTRAPOLATION {
+            return None;
+        }
+        let newest = self.odometry.at(last)?;
+        let step = 0.02_f64.min(t - last).max(1e-3);
+        match self.odometry.at(last - step) {
+            Some(before) if self.odometry.covers(last - step) => {
+                Some(before.interpolate(&newest, (t - (last - step)) / step))
+            }
+            _ => Some(newest),
+        }
+    }
+
+    /// Localizes one scan (its `t` on the daemon's clock) and, on
+    /// keyframes, grows the map. `queued` is the time from the telegram's
+    /// last byte to now, when known; the last-byte-to-pose latency is
+    /// `queued` plus the processing.
+    pub fn on_scan(&mut self, scan: RangeScan, queued: Option<Duration>) -> ScanOutcome {
+        let _span = info_span!("scan", t = scan.t).entered();
+        let started = std::time::Instant::now();
+        let t = scan.t;
+        let odometry = self.odometry_at(t);
+        let outcome = self.mapper.process(&ScanRecord { scan, odometry });
+        let times = self.mapper.last_scan_times();
+        let l = &mut self.latencies;
+        for (stage, d) in [
+            (Stage::Predict, times.predict),
+            (Stage::Extract, times.extract),
+            (Stage::Localize, times.localize),
+            (Stage::MapUpdate, times.map_update),
+            (Stage::ClsUpdate, times.cls_update),
+        ] {
+            if let Some(d) = d {
+                l.record(stage, d);
+            }
+        }
+        if let Some(q) = queued {
+            l.record(Stage::Queue, q);
+            l.record(Stage::Pose, q + started.elapsed());
+        }
+        self.scans += 1;
+        self.localized += u64::from(outcome.localized);
+        self.last_fix = Some((t, outcome.pose, odometry));
+        outcome
+    }
+
+    /// The robot's pose (map frame) now: the last scan's pose moved on by
+    /// the odometry since it, when there is odometry for both times.
+    pub fn pose_now(&self) -> Option<Pose2> {
+        let (_, pose, odo_then) = self.last_fix?;
+        let newest = self.odometry.last_time().and_then(|t| self.odometry.at(t));
+        match (odo_then, newest) {
+            (Some(a), Some(b)) => Some(pose.compose(&a.between(&b))),
+            _ => Some(pose),
+        }
+    }
+
+    /// The exploration command at `now` (s): zero without an explorer or a
+    /// pose, and what the explorer reported, if anything.
+    pub fn control(&mut self, now: f64) -> (Twist, Option<ExplorerEvent>) {
+        let started = std::time::Instant::now();
+        let Some(pose) = self.pose_now() else {
+            return (Twist::ZERO, None);
+        };
+        let Some(explorer) = self.explorer.as_mut() else {
+            return (Twist::ZERO, None);
+        };
+        let result = explorer.control(self.mapper.cls_map(), pose, now);
+        self.latencies.record(Stage::Control, started.elapsed());
+        if let Some(event) = &result.1 {
+            log_event(event);
+        }
+        result
+    }
+
+    pub fn exploration_complete(&self) -> bool {
+        self.explorer.as_ref().is_some_and(|e| e.is_complete())
+    }
+
+    pub fn status(&self) -> LiveStatus {
+        let cls = self.mapper.cls_map();
+        LiveStatus {
+            scans: self.scans,
+            localized: self.localized,
+            keyframes: self.mapper.summary().keyframes,
+            walls: cls.actual_segments().count(),
+            frontiers: cls.virtual_segments().count(),
+            loops: cls.loops().count(),
+            pose: self.pose_now(),
+            exploring: self.explorer.as_ref().is_some_and(|e| !e.is_complete()),
+            exploration_complete: self.exploration_complete(),
+            explorer: self.explorer.as_ref().map(|e| e.stats()),
+        }
+    }
+
+    /// Writes the map, its picture and the trajectory into `dir`, each file
+    /// atomically (a crash mid-write leaves the previous checkpoint).
+    pub fn checkpoint(&self, dir: &std::path::Path) -> Result<(), PipelineError> {
+        let _span = info_span!("checkpoint").entered();
+        write_outputs(dir, &self.mapper)
+    }
+}
+
+fn log_event(event: &ExplorerEvent) {
+    match event {
+        ExplorerEvent::Goal {
+            goal, path_length, ..
+        } => info!(
+            x = goal.x,
+            y = goal.y,
+            path_m = path_length,
+            "exploration: new goal in front of a frontier"
+        ),
+        ExplorerEvent::Arrived { .. } => info!("exploration: goal reached"),
+        ExplorerEvent::TimedOut { .. } => warn!("exploration: goal not reached in time, abandoned"),
+        ExplorerEvent::PlanFailed { reason } => warn!("exploration: no step planned: {reason}"),
+        ExplorerEvent::Complete { given_up } => info!(
+            given_up,
+            "exploration complete: no frontier worth pursuing is left"
+        ),
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn odometry_is_interpolated_and_briefly_extrapolated() {
+        let mut live = LiveMapper::new(MapperConfig::default(), None, 0.0);
+        assert!(live.odometry_at(0.0).is_none());
+        for k in 0..=10 {
+            let t = k as f64 * 0.02;
+            assert!(live.on_odometry(t, Pose2::new(t * 0.5, 0.0, 0.0)));
+        }
+        assert!(!live.on_odometry(0.1, Pose2::IDENTITY), "out of order");
+        let mid = live.odometry_at(0.11).unwrap();
+        assert!((mid.x - 0.055).abs() < 1e-12);
+        let ahead = live.odometry_at(0.25).unwrap();
+        assert!((ahead.x - 0.125).abs() < 1e-9, "{ahead:?}");
+        assert!(live.odometry_at(0.35).is_none(), "too far ahead");
+    }
+
+    #[test]
+    fn without_a_scan_there_is_no_pose_and_no_motion() {
+        let mut live = LiveMapper::new(
+            MapperConfig::default(),
+            Some((ExplorationConfig::default(), DriveConfig::default())),
+            0.0,
+        );
+        assert_eq!(live.pose_now(), None);
+        assert_eq!(live.control(1.0), (Twist::ZERO, None));
+        let s = live.status();
+        assert_eq!((s.scans, s.walls), (0, 0));
+        assert!(s.exploring && !s.exploration_complete);
+    }
+}

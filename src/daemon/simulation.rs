@@ -1,0 +1,286 @@
+//! The simulated robot of `[sim]`, and [`VirtualRobot`]: the daemon's loop
+//! on a virtual clock.
+//!
+//! The live daemon (`clsmap run`, `clsmap demo`) puts the emulated LMS200
+//! on a pseudo-terminal and runs at the sensor's real pace. `VirtualRobot`
+//! wires the same pieces — emulator, serial link state machine, simulated
+//! base, [`LiveMapper`], [`BaseDriver`] — through
+//! [`VirtualLine`](lms200::virtual_line::VirtualLine) instead, so the
+//! telegrams, the link's timing, the odometry and the exploration all run
+//! as they would, only as fast as the CPU allows: an hour of robot time in
+//! a minute or two, for tests and soak runs.
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use clsmap_base::{BaseAdapter, SimBase, Twist};
+use lms200::Units;
+use lms200::emulator::{Emulator, EmulatorConfig};
+use lms200::link::Event;
+use lms200::virtual_line::VirtualLine;
+
+use super::base_driver::BaseDriver;
+use super::config::{DaemonConfig, SensorSource};
+use super::live::LiveMapper;
+use super::runtime::DaemonError;
+use crate::geometry::Pose2;
+use crate::input::lms200::range_scan;
+use crate::sim::world_file::WorldFile;
+use crate::sim::{LMS200_MAX_RANGE_CM_MODE, LMS200_MAX_RANGE_MM_MODE, SimRobot, WorldRangeSource};
+
+/// The world of `[sim] world`: a built-in name or a world file.
+pub fn load_world(name: &str) -> Result<WorldFile, DaemonError> {
+    if let Some(w) = WorldFile::builtin(name) {
+        return Ok(w);
+    }
+    let path = Path::new(name);
+    if path.exists() || name.contains('/') || name.contains('.') {
+        return WorldFile::load(path).map_err(|e| DaemonError::World(name.into(), e));
+    }
+    Err(DaemonError::UnknownWorld(
+        name.into(),
+        WorldFile::BUILTIN_NAMES.join(", "),
+    ))
+}
+
+/// The robot of `[sim]` and `[base]`, standing at its start in its world.
+pub fn simulated_robot(config: &DaemonConfig) -> Result<(SimRobot, WorldFile), DaemonError> {
+    let world = load_world(&config.sim.world)?;
+    let start = config.sim.start.unwrap_or(world.start);
+    let base = SimBase::new(config.base.limits()).with_odometry_error(
+        config.sim.odometry_scale_error,
+        config.sim.odometry_heading_drift,
+    );
+    Ok((SimRobot::new(base, start), world))
+}
+
+/// An emulated LMS200 on `robot` measuring `world`; its clock starts at
+/// `t0`, which must be the daemon's, so scan times and robot poses agree.
+pub fn emulated_sensor(
+    config: &DaemonConfig,
+    world: &WorldFile,
+    robot: &SimRobot,
+    t0: Instant,
+) -> Emulator {
+    let max_range = match config.units() {
+        Some(Units::Cm) => LMS200_MAX_RANGE_CM_MODE,
+        _ => LMS200_MAX_RANGE_MM_MODE,
+    };
+    let source = WorldRangeSource::new(
+        world.world.clone(),
+        robot.clone(),
+        config.mapper.laser_mount,
+        max_range,
+        config.sim.range_sigma,
+        config.sim.seed,
+    );
+    let sensor = EmulatorConfig {
+        // Powered and ready, as a sensor switched on before the daemon.
+        power_on_delay: None,
+        // Nothing compares the sent scans: keep no log of them.
+        scan_log_capacity: 0,
+        ..EmulatorConfig::default()
+    };
+    Emulator::with_range_source(sensor, Box::new(source), t0)
+}
+
+/// What a virtual run measured.
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize)]
+pub struct VirtualStats {
+    /// Virtual seconds run.
+    pub t: f64,
+    pub scans: u64,
+    /// Position error (m) of the estimate against the truth, both in the
+    /// map frame (the robot's pose at the first scan).
+    pub mean_error: f64,
+    pub max_error: f64,
+    /// Largest heading error (rad).
+    pub max_heading_error: f64,
+    /// Metres the robot drove (truth).
+    pub driven: f64,
+    /// Link events other than scans (connects, silences, errors).
+    pub link_events: Vec<String>,
+}
+
+/// The daemon's loop on a virtual clock; see the module doc.
+pub struct VirtualRobot {
+    t0: Instant,
+    /// Virtual seconds since `t0`.
+    now: f64,
+    line: VirtualLine,
+    robot: SimRobot,
+    world: WorldFile,
+    live: LiveMapper,
+    base: BaseDriver,
+    mode: lms200::MeasuringMode,
+    tick: f64,
+    silence_stop: f64,
+    last_scan_at: Option<f64>,
+    /// World pose at the first scan: the map frame.
+    origin: Option<Pose2>,
+    last_truth: Option<Pose2>,
+    error_sum: f64,
+    stats: VirtualStats,
+}
+
+impl std::fmt::Debug for VirtualRobot {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("VirtualRobot")
+            .field("now", &self.now)
+            .field("stats", &self.stats)
+            .finish_non_exhaustive()
+    }
+}
+
+impl VirtualRobot {
+    /// The robot of `config` (`[sim]`, `[base]`, `[mapper]`,
+    /// `[exploration]`); `[sensor]` is the emulated LMS200 whatever it says.
+    pub fn new(config: &DaemonConfig) -> Result<VirtualRobot, DaemonError> {
+        let t0 = Instant::now();
+        let mut config = config.clone();
+        config.sensor.source = SensorSource::Emulator;
+        let (robot, world) = simulated_robot(&config)?;
+        let emulator = emulated_sensor(&config, &world, &robot, t0);
+        let link = config.link();
+        let mode = link.measuring_mode;
+        let exploration = config
+            .exploration
+            .enabled
+            .then_some((config.exploration.planner, config.exploration.drive));
+        Ok(VirtualRobot {
+            t0,
+            now: 0.0,
+            line: VirtualLine::new(link, emulator, t0),
+            live: LiveMapper::new(config.mapper, exploration, 0.0),
+            base: BaseDriver::new(
+                Some(Box::new(robot.base())),
+                config.base.limits(),
+                config.base.stale_odometry,
+            ),
+            robot,
+            world,
+            mode,
+            tick: 1.0 / config.base.rate,
+            silence_stop: config.sensor.silence_stop,
+            last_scan_at: None,
+            origin: None,
+            last_truth: None,
+            error_sum: 0.0,
+            stats: VirtualStats::default(),
+        })
+    }
+
+    /// Virtual seconds since the start.
+    pub fn now(&self) -> f64 {
+        self.now
+    }
+
+    pub fn live(&self) -> &LiveMapper {
+        &self.live
+    }
+
+    pub fn robot(&self) -> &SimRobot {
+        &self.robot
+    }
+
+    pub fn world(&self) -> &WorldFile {
+        &self.world
+    }
+
+    pub fn line_mut(&mut self) -> &mut VirtualLine {
+        &mut self.line
+    }
+
+    pub fn stats(&self) -> &VirtualStats {
+        &self.stats
+    }
+
+    /// The world pose of the map frame's origin (the robot at the first
+    /// scan), once there was a scan.
+    pub fn map_origin(&self) -> Option<Pose2> {
+        self.origin
+    }
+
+    /// The instant `t` virtual seconds after the start.
+    pub fn instant(&self, t: f64) -> Instant {
+        self.t0 + Duration::from_secs_f64(t.max(0.0))
+    }
+
+    /// One control period: the line runs to the end of it, scans are
+    /// mapped, then the base is polled and commanded, as the daemon's
+    /// loop does.
+    pub fn tick(&mut self) {
+        let next = self.now + self.tick;
+        let until = self.instant(next);
+        let mut scans = Vec::new();
+        let mut events = Vec::new();
+        self.line.advance_to(until, |_, event| match event {
+            Event::Scan(s) => scans.push(s),
+            other => events.push(format!("{other:?}")),
+        });
+        self.stats.link_events.extend(events);
+        self.now = next;
+        self.base.poll(self.now, &mut self.live);
+        for timed in scans {
+            let t = timed
+                .timestamp
+                .saturating_duration_since(self.t0)
+                .as_secs_f64();
+            let Some(scan) = range_scan(&timed.scan, t, self.mode) else {
+                continue;
+            };
+            let outcome = self.live.on_scan(scan, None);
+            self.last_scan_at = Some(self.now);
+            self.score(t, outcome.pose);
+        }
+        let sensor_ok = self
+            .last_scan_at
+            .is_some_and(|t| self.now - t <= self.silence_stop);
+        let twist = if sensor_ok {
+            self.live.control(self.now).0
+        } else {
+            Twist::ZERO
+        };
+        let last_odometry = self.live.last_odometry_time();
+        self.base
+            .command(twist, !sensor_ok, self.now, last_odometry);
+    }
+
+    fn score(&mut self, t: f64, estimate: Pose2) {
+        let truth = self.robot.true_pose_at(t);
+        let origin = *self.origin.get_or_insert(truth);
+        if let Some(last) = self.last_truth {
+            self.stats.driven += (truth.x - last.x).hypot(truth.y - last.y);
+        }
+        self.last_truth = Some(truth);
+        let truth_map = origin.between(&truth);
+        let e = (estimate.x - truth_map.x).hypot(estimate.y - truth_map.y);
+        self.error_sum += e;
+        self.stats.scans += 1;
+        self.stats.mean_error = self.error_sum / self.stats.scans as f64;
+        self.stats.max_error = self.stats.max_error.max(e);
+        self.stats.max_heading_error = self
+            .stats
+            .max_heading_error
+            .max(crate::geometry::wrap_angle(estimate.theta - truth_map.theta).abs());
+        self.stats.t = self.now;
+    }
+
+    /// Ticks until `done` holds or `limit` virtual seconds have passed;
+    /// returns whether `done` held.
+    pub fn run_until(&mut self, limit: f64, mut done: impl FnMut(&VirtualRobot) -> bool) -> bool {
+        while self.now < limit {
+            if done(self) {
+                return true;
+            }
+            self.tick();
+        }
+        done(self)
+    }
+
+    /// Stops the base (the robot coasts to a halt within its limits).
+    pub fn stop_base(&mut self) {
+        self.base.stop(self.now);
+        let _ = self.robot.base().stop(self.now);
+    }
+}

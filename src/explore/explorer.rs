@@ -1,0 +1,291 @@
+//! [`Explorer`]: Virtual Line Segment Pursuit as a running behaviour —
+//! choose a frontier ([`next_step`]), drive there ([`PathFollower`]), stand
+//! still while the map takes in the view, choose again; until the map is
+//! complete.
+//!
+//! It takes the map, the robot's pose and the time, and gives a velocity:
+//! no clock, no I/O, so the daemon, the demo and the tests drive it alike.
+
+use clsmap_base::Twist;
+use serde::Serialize;
+
+use super::config::ExplorationConfig;
+use super::follow::{DriveConfig, FollowStep, PathFollower};
+use super::goal::Frontier;
+use super::memory::ExplorationMemory;
+use super::planner::path_length;
+use super::pursuit::{ExploreError, NextStep, next_step};
+use crate::geometry::Pose2;
+use crate::map::cls::ClsMap;
+
+/// What the explorer is doing.
+#[derive(Debug, Clone, PartialEq)]
+enum State {
+    /// Standing still until `until` (s), then choosing the next goal.
+    Settling { until: f64 },
+    /// Driving to a goal; abandoned at `deadline` (s).
+    Driving {
+        follower: PathFollower,
+        deadline: f64,
+    },
+    /// No frontier worth pursuing is left.
+    Complete { given_up: Vec<Frontier> },
+}
+
+/// Something worth telling the operator.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub enum ExplorerEvent {
+    /// A new goal in front of `frontier`, `path_length` m away.
+    Goal {
+        goal: Pose2,
+        frontier: Frontier,
+        path_length: f64,
+    },
+    /// The goal was reached.
+    Arrived { goal: Pose2 },
+    /// The goal was not reached in time and is abandoned.
+    TimedOut { goal: Pose2 },
+    /// No step could be planned (the robot off the free region, an empty
+    /// map); it waits and tries again.
+    PlanFailed { reason: String },
+    /// Exploration is complete; `given_up` frontiers could not be closed.
+    Complete { given_up: usize },
+}
+
+/// Counters of a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub struct ExplorerStats {
+    pub goals: usize,
+    pub arrived: usize,
+    pub timed_out: usize,
+    pub plan_failures: usize,
+}
+
+/// Virtual Line Segment Pursuit, step by step.
+#[derive(Debug, Clone)]
+pub struct Explorer {
+    planner: ExplorationConfig,
+    drive: DriveConfig,
+    memory: ExplorationMemory,
+    state: State,
+    stats: ExplorerStats,
+}
+
+impl Explorer {
+    /// Starts by settling for `drive.settle_time` from `now` (s), so the
+    /// first scans build a map to plan in.
+    pub fn new(planner: ExplorationConfig, drive: DriveConfig, now: f64) -> Explorer {
+        Explorer {
+            planner,
+            drive,
+            memory: ExplorationMemory::default(),
+            state: State::Settling {
+                until: now + drive.settle_time,
+            },
+            stats: ExplorerStats::default(),
+        }
+    }
+
+    /// Takes new tuning (SIGHUP); the memory of frontiers and the current
+    /// goal are kept.
+    pub fn retune(&mut self, planner: ExplorationConfig, drive: DriveConfig) {
+        self.planner = planner;
+        self.drive = drive;
+    }
+
+    pub fn is_complete(&self) -> bool {
+        matches!(self.state, State::Complete { .. })
+    }
+
+    /// The goal driven to, if any.
+    pub fn goal(&self) -> Option<Pose2> {
+        match &self.state {
+            State::Driving { follower, .. } => Some(follower.goal()),
+            _ => None,
+        }
+    }
+
+    /// Frontiers given up on when exploration completed.
+    pub fn given_up(&self) -> &[Frontier] {
+        match &self.state {
+            State::Complete { given_up } => given_up,
+            _ => &[],
+        }
+    }
+
+    pub fn stats(&self) -> ExplorerStats {
+        self.stats
+    }
+
+    /// The velocity (robot frame) for a robot at `pose` (map frame) at
+    /// `now` (s) in `map`, and what happened, if anything.
+    pub fn control(
+        &mut self,
+        map: &ClsMap,
+        pose: Pose2,
+        now: f64,
+    ) -> (Twist, Option<ExplorerEvent>) {
+        match &mut self.state {
+            State::Complete { .. } => (Twist::ZERO, None),
+            State::Settling { until } => {
+                if now < *until {
+                    return (Twist::ZERO, None);
+                }
+                (Twist::ZERO, Some(self.plan(map, pose, now)))
+            }
+            State::Driving { follower, deadline } => {
+                if now > *deadline {
+                    let goal = follower.goal();
+                    self.stats.timed_out += 1;
+                    self.settle(now);
+                    return (Twist::ZERO, Some(ExplorerEvent::TimedOut { goal }));
+                }
+                match follower.step(&pose, &self.drive) {
+                    FollowStep::Drive(twist) => (twist, None),
+                    FollowStep::Arrived => {
+                        let goal = follower.goal();
+                        self.stats.arrived += 1;
+                        self.settle(now);
+                        (Twist::ZERO, Some(ExplorerEvent::Arrived { goal }))
+                    }
+                }
+            }
+        }
+    }
+
+    fn settle(&mut self, now: f64) {
+        self.state = State::Settling {
+            until: now + self.drive.settle_time,
+        };
+    }
+
+    fn plan(&mut self, map: &ClsMap, pose: Pose2, now: f64) -> ExplorerEvent {
+        match next_step(map, pose, &self.planner, &mut self.memory) {
+            Ok(NextStep::Goal {
+                goal,
+                frontier,
+                path,
+            }) => {
+                let length = path_length(&path);
+                self.stats.goals += 1;
+                self.state = State::Driving {
+                    follower: PathFollower::new(path, goal),
+                    deadline: now + self.drive.timeout(length),
+                };
+                ExplorerEvent::Goal {
+                    goal,
+                    frontier,
+                    path_length: length,
+                }
+            }
+            Ok(NextStep::Complete { given_up }) => {
+                let n = given_up.len();
+                self.state = State::Complete { given_up };
+                ExplorerEvent::Complete { given_up: n }
+            }
+            Err(e) => {
+                self.stats.plan_failures += 1;
+                self.settle(now);
+                ExplorerEvent::PlanFailed {
+                    reason: plan_failure(&e),
+                }
+            }
+        }
+    }
+}
+
+fn plan_failure(e: &ExploreError) -> String {
+    let mut text = e.to_string();
+    let mut source = std::error::Error::source(e);
+    while let Some(s) = source {
+        text.push_str(": ");
+        text.push_str(&s.to_string());
+        source = s.source();
+    }
+    text
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::map::cls::{ClsLoop, ClsMapConfig, ClsSegment, ClsShape, SegmentMode};
+
+    fn room(open: &[usize]) -> ClsMap {
+        let pts = [[0.0, 0.0], [6.0, 0.0], [6.0, 3.0], [0.0, 3.0]];
+        let segments = (0..4)
+            .map(|i| {
+                let mut s = ClsSegment::virtual_between(pts[i], pts[(i + 1) % 4]);
+                if !open.contains(&i) {
+                    s.mode = SegmentMode::Actual;
+                }
+                s
+            })
+            .collect();
+        let shape = ClsShape {
+            outer: ClsLoop::new(segments),
+            holes: vec![],
+        };
+        ClsMap::from_shapes(ClsMapConfig::default(), vec![shape]).unwrap()
+    }
+
+    #[test]
+    fn settles_plans_drives_arrives_and_completes() {
+        let drive = DriveConfig::default();
+        let mut ex = Explorer::new(ExplorationConfig::default(), drive, 0.0);
+        let open = room(&[1]);
+        let mut pose = Pose2::new(3.0, 1.5, 0.0);
+        // Settling first.
+        assert_eq!(ex.control(&open, pose, 0.1), (Twist::ZERO, None));
+        let (_, event) = ex.control(&open, pose, 0.6);
+        assert!(
+            matches!(event, Some(ExplorerEvent::Goal { .. })),
+            "{event:?}"
+        );
+        let goal = ex.goal().unwrap();
+        // Drive with perfect motion until arrival.
+        let dt = 0.02;
+        let mut t = 0.6;
+        let arrived = loop {
+            t += dt;
+            let (tw, event) = ex.control(&open, pose, t);
+            if let Some(e) = event {
+                break e;
+            }
+            let (s, c) = pose.theta.sin_cos();
+            pose = Pose2::new(
+                pose.x + (c * tw.vx - s * tw.vy) * dt,
+                pose.y + (s * tw.vx + c * tw.vy) * dt,
+                pose.theta + tw.omega * dt,
+            );
+            assert!(t < 30.0);
+        };
+        assert_eq!(arrived, ExplorerEvent::Arrived { goal });
+        // The frontier got "scanned": the map is now closed.
+        let closed = room(&[]);
+        let (_, event) = ex.control(&closed, pose, t + drive.settle_time + 0.01);
+        assert_eq!(event, Some(ExplorerEvent::Complete { given_up: 0 }));
+        assert!(ex.is_complete());
+        assert_eq!(ex.control(&closed, pose, t + 5.0), (Twist::ZERO, None));
+        assert_eq!(ex.stats().goals, 1);
+        assert_eq!(ex.stats().arrived, 1);
+    }
+
+    #[test]
+    fn a_goal_not_reached_in_time_is_abandoned_and_bad_poses_wait() {
+        let mut ex = Explorer::new(ExplorationConfig::default(), DriveConfig::default(), 0.0);
+        let open = room(&[1]);
+        let pose = Pose2::new(3.0, 1.5, 0.0);
+        ex.control(&open, pose, 1.0);
+        assert!(ex.goal().is_some());
+        // The robot never moves.
+        let (_, event) = ex.control(&open, pose, 1000.0);
+        assert!(matches!(event, Some(ExplorerEvent::TimedOut { .. })));
+        let nan = Pose2::new(f64::NAN, 0.0, 0.0);
+        let (tw, event) = ex.control(&open, nan, 1001.0);
+        assert_eq!(tw, Twist::ZERO);
+        assert!(matches!(event, Some(ExplorerEvent::PlanFailed { .. })));
+        assert_eq!(ex.stats().plan_failures, 1);
+        assert!(!ex.is_complete());
+    }
+}

@@ -1,0 +1,176 @@
+//! The daemon's loop end to end: on a virtual clock (the emulated LMS200,
+//! the serial link state machine, the simulated base, the mapper and the
+//! explorer, faster than real time), and as the `clsmap run` process
+//! through a real pseudo-terminal with signals.
+
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use clsmap::daemon::simulation::VirtualRobot;
+use clsmap::demo::{demo_config, walls_on_world};
+use clsmap::explore::pursuit::long_frontiers;
+
+#[test]
+fn the_demo_world_is_explored_to_completion_on_a_virtual_clock() {
+    let config = demo_config().unwrap();
+    let mut robot = VirtualRobot::new(&config).unwrap();
+    let done = robot.run_until(config.daemon.max_run_time, |r| {
+        r.live().exploration_complete()
+    });
+    let live = robot.live();
+    let map = live.mapper().cls_map();
+    map.check_invariants().unwrap();
+    let stats = robot.stats().clone();
+    let explorer = live.explorer().unwrap().stats();
+    let origin = robot.map_origin().unwrap();
+    let on_walls = |tolerance| walls_on_world(map, &robot.world().world, origin, tolerance);
+    let left = long_frontiers(map, config.exploration.planner.min_frontier_length);
+    println!(
+        "{:.0} s virtual: {} scans, {:.1} m driven, {explorer:?}, mean error {:.3} m, max {:.3} m, \
+         max heading {:.2}°, {} walls {} frontiers {} loops, wall length on real walls: {:.1} % within 5 cm, \
+         {:.1} % within 10 cm, {:.1} % within 15 cm; {} long frontiers left",
+        stats.t,
+        stats.scans,
+        stats.driven,
+        stats.mean_error,
+        stats.max_error,
+        stats.max_heading_error.to_degrees(),
+        map.actual_segments().count(),
+        map.virtual_segments().count(),
+        map.loops().count(),
+        100.0 * on_walls(0.05),
+        100.0 * on_walls(0.10),
+        100.0 * on_walls(0.15),
+        left.len()
+    );
+    let svg = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("daemon-virtual-demo.svg");
+    std::fs::write(&svg, clsmap::map::cls::picture(map, None, None).to_svg()).unwrap();
+    println!("picture: {}", svg.display());
+    assert!(done, "exploration did not complete");
+    // Complete: every long frontier left was given up after its visits
+    // (a wall piece left virtual a few cm off the wall can be one).
+    let given_up = live.explorer().unwrap().given_up();
+    assert!(
+        left.iter().all(|f| given_up.contains(f)) && given_up.len() <= 2,
+        "long frontiers left: {left:?}, given up: {given_up:?}"
+    );
+    assert_eq!(explorer.timed_out, 0);
+    // Down the corridors the far walls lie beyond the LMS200's 8.18 m, so
+    // the odometry's 2 % scale error shifts the map along them by up to
+    // ~15 cm; the walls themselves are straight and parallel.
+    assert!(on_walls(0.15) > 0.95, "{}", on_walls(0.15));
+    assert!(stats.mean_error < 0.12, "{stats:?}");
+    assert!(stats.max_heading_error.to_degrees() < 1.0, "{stats:?}");
+    assert!(live.mapper().summary().rejected_localizations * 100 < stats.scans as usize);
+}
+
+/// The demo configuration on the loop world, exploring.
+fn exploring_robot() -> (clsmap::daemon::DaemonConfig, VirtualRobot) {
+    let config = demo_config().unwrap();
+    let robot = VirtualRobot::new(&config).unwrap();
+    (config, robot)
+}
+
+/// Runs until the robot drives (a goal was chosen and it is under way).
+fn until_driving(robot: &mut VirtualRobot) {
+    let t0 = robot.now();
+    assert!(
+        robot.run_until(t0 + 30.0, |r| r.robot().applied_twist().linear_speed()
+            > 0.3),
+        "the robot never got going"
+    );
+}
+
+#[test]
+fn a_silent_sensor_stops_the_base_keeps_the_map_and_mapping_resumes() {
+    let (config, mut robot) = exploring_robot();
+    until_driving(&mut robot);
+    let walls_before = robot.live().status().walls;
+    let t = robot.now();
+    let at = robot.instant(t);
+    robot
+        .line_mut()
+        .emulator_mut()
+        .silence(at, std::time::Duration::from_secs(4));
+    // Within the silence limit plus the time to brake, the base stands.
+    let settle = config.sensor.silence_stop + 1.0;
+    robot.run_until(t + settle, |_| false);
+    assert!(
+        robot.robot().applied_twist().linear_speed() < 1e-6,
+        "still moving {:?} {:.1} s into the silence",
+        robot.robot().applied_twist(),
+        settle
+    );
+    let scans_in_silence = robot.stats().scans;
+    robot.run_until(t + 3.5, |_| false);
+    assert_eq!(
+        robot.stats().scans,
+        scans_in_silence,
+        "no scans while silent"
+    );
+    assert!(
+        robot.live().status().walls >= walls_before,
+        "the map is kept"
+    );
+    // The link notices, re-initialises, streams again; exploration goes on.
+    let done = robot.run_until(config.daemon.max_run_time, |r| {
+        r.live().exploration_complete()
+    });
+    assert!(done, "exploration did not complete after the silence");
+    assert!(robot.stats().scans > scans_in_silence + 1000);
+    let events = &robot.stats().link_events;
+    assert!(
+        events.iter().any(|e| e.contains("SensorSilent")),
+        "{events:?}"
+    );
+    robot.live().mapper().cls_map().check_invariants().unwrap();
+    assert!(robot.stats().mean_error < 0.12, "{:?}", robot.stats());
+}
+
+#[test]
+fn garbage_on_the_line_costs_scans_but_not_the_map() {
+    let (config, mut robot) = exploring_robot();
+    until_driving(&mut robot);
+    robot
+        .line_mut()
+        .emulator_mut()
+        .set_faults(lms200::emulator::FaultConfig {
+            garbage_per_byte: 0.0005,
+            bit_flip_per_byte: 0.0002,
+            ..Default::default()
+        });
+    let done = robot.run_until(config.daemon.max_run_time, |r| {
+        r.live().exploration_complete()
+    });
+    let counts = robot.line_mut().emulator().fault_counts();
+    println!("{counts:?} {:?}", robot.stats().scans);
+    assert!(done, "exploration did not complete on a noisy line");
+    robot.live().mapper().cls_map().check_invariants().unwrap();
+    assert!(robot.stats().mean_error < 0.12, "{:?}", robot.stats());
+    assert!(robot.stats().max_heading_error.to_degrees() < 1.0);
+}
+
+#[test]
+fn stalled_odometry_stops_the_base_until_it_returns() {
+    let (config, mut robot) = exploring_robot();
+    until_driving(&mut robot);
+    let t = robot.now();
+    robot.robot().set_odometry_frozen(true);
+    robot.run_until(t + config.base.stale_odometry + 1.0, |_| false);
+    assert!(
+        robot.robot().applied_twist().linear_speed() < 1e-6,
+        "moving on stale odometry: {:?}",
+        robot.robot().applied_twist()
+    );
+    let scans = robot.stats().scans;
+    robot.run_until(t + 5.0, |_| false);
+    assert!(robot.stats().scans > scans + 100, "the loop maps on");
+    robot.robot().set_odometry_frozen(false);
+    let done = robot.run_until(config.daemon.max_run_time, |r| {
+        r.live().exploration_complete()
+    });
+    assert!(done, "exploration did not complete after the stall");
+    robot.live().mapper().cls_map().check_invariants().unwrap();
+    assert!(robot.stats().mean_error < 0.12, "{:?}", robot.stats());
+}
