@@ -335,6 +335,13 @@ impl OfflineMapper {
         self.odometry.trust_unchanged(true);
     }
 
+    /// Hands over the poses recorded so far and forgets them, so a mapper
+    /// that runs for days keeps its memory bounded (the daemon appends
+    /// them to its trajectory file at each checkpoint).
+    pub fn take_trajectory(&mut self) -> Vec<StampedPose> {
+        std::mem::take(&mut self.trajectory)
+    }
+
     /// How long each stage took in the last scan processed.
     pub fn last_scan_times(&self) -> LastScanTimes {
         LastScanTimes {
@@ -532,18 +539,30 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<(), PipelineError> {
 /// ([`SEGMENTS_FILE`]), the CLS map ([`MAP_FILE`]) and its picture with the
 /// trajectory ([`PICTURE_FILE`]).
 pub fn write_outputs(out_dir: &Path, mapper: &OfflineMapper) -> Result<(), PipelineError> {
-    std::fs::create_dir_all(out_dir).map_err(|source| PipelineError::Output {
-        path: out_dir.to_owned(),
-        source,
-    })?;
+    create_output_dir(out_dir)?;
     let mut tum = Vec::new();
     write_tum(&mut tum, mapper.trajectory())?;
     write_file(&out_dir.join(TRAJECTORY_FILE), &tum)?;
+    let poses: Vec<Pose2> = mapper.trajectory().iter().map(|(_, p)| *p).collect();
+    write_maps(out_dir, mapper, &poses)
+}
+
+/// Creates `out_dir` and its parents if needed.
+pub fn create_output_dir(out_dir: &Path) -> Result<(), PipelineError> {
+    std::fs::create_dir_all(out_dir).map_err(|source| PipelineError::Output {
+        path: out_dir.to_owned(),
+        source,
+    })
+}
+
+/// Writes the maps into `out_dir`, each file atomically: the segment map
+/// ([`SEGMENTS_FILE`]), the CLS map ([`MAP_FILE`]) and its picture
+/// ([`PICTURE_FILE`]) with `path` drawn on it.
+pub fn write_maps(out_dir: &Path, mapper: &OfflineMapper, path: &[Pose2]) -> Result<(), PipelineError> {
     let json = serde_json::to_vec_pretty(&mapper.map().snapshot())?;
     write_file(&out_dir.join(SEGMENTS_FILE), &json)?;
     mapper.cls_map().save(&out_dir.join(MAP_FILE))?;
-    let poses: Vec<Pose2> = mapper.trajectory().iter().map(|(_, p)| *p).collect();
-    let pic = picture(mapper.cls_map(), Some(&poses), poses.last().copied());
+    let pic = picture(mapper.cls_map(), Some(path), path.last().copied());
     write_file(&out_dir.join(PICTURE_FILE), pic.to_svg().as_bytes())
 }
 

@@ -22,7 +22,16 @@ pub enum TrajectoryError {
 /// Writes a trajectory. Times keep microseconds (the CARMEN resolution),
 /// positions micrometres.
 pub fn write_tum<W: Write>(out: &mut W, poses: &[StampedPose]) -> Result<(), TrajectoryError> {
-    writeln!(out, "# timestamp x y z qx qy qz qw")?;
+    writeln!(out, "{TUM_HEADER}")?;
+    write_tum_lines(out, poses)
+}
+
+/// The header line [`write_tum`] starts with.
+pub const TUM_HEADER: &str = "# timestamp x y z qx qy qz qw";
+
+/// The pose lines of [`write_tum`] without the header, for appending to a
+/// trajectory file.
+pub fn write_tum_lines<W: Write>(out: &mut W, poses: &[StampedPose]) -> Result<(), TrajectoryError> {
     for (t, p) in poses {
         let (s, c) = (p.theta / 2.0).sin_cos();
         writeln!(out, "{t:.6} {:.6} {:.6} 0 0 0 {s:.9} {c:.9}", p.x, p.y)?;

@@ -1032,7 +1032,7 @@ fn demo_run_config(dir: &TempDir, extra: &str) -> PathBuf {
         std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("config/demo.toml"))
             .unwrap()
             .replace("exit_when_complete = true", "exit_when_complete = false")
-            .replace("checkpoint_interval = 10.0", "checkpoint_interval = 1.0")
+            .replace("checkpoint_interval = 30.0", "checkpoint_interval = 1.0")
             .replace("status_interval = 5.0", "status_interval = 1.0")
             .replace(
                 "[daemon]",

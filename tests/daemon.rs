@@ -11,9 +11,37 @@ use clsmap::daemon::simulation::VirtualRobot;
 use clsmap::demo::{demo_config, walls_on_world};
 use clsmap::explore::pursuit::long_frontiers;
 
+/// How close each world's map gets: mean pose error (m) and the share of
+/// wall length within 15 cm of a real wall. Where corridors run longer
+/// than the LMS200's 8.18 m reach and show no cross wall, the along-way
+/// position rests on odometry alone (2 % scale error in the simulation),
+/// and the map stretches with it: honest limits, not tuning targets.
+fn expected(world: &str) -> (f64, f64) {
+    match world {
+        // 10 m sides, far walls out of reach: ~15 cm along them.
+        "loop" => (0.12, 0.95),
+        // 30 m with 0.15 m door recesses (shorter than a line): ~0.5 m.
+        "corridor" => (0.3, 0.9),
+        // A 20 m corridor whose doorways are its only cross walls.
+        "office" => (0.08, 0.9),
+        _ => (0.05, 0.98),
+    }
+}
+
+/// The demo's world among them.
 #[test]
-fn the_demo_world_is_explored_to_completion_on_a_virtual_clock() {
-    let config = demo_config().unwrap();
+fn every_built_in_world_is_explored_to_completion_on_a_virtual_clock() {
+    let demo_world = demo_config().unwrap().sim.world;
+    assert!(clsmap::sim::WorldFile::BUILTIN_NAMES.contains(&demo_world.as_str()));
+    for world in clsmap::sim::WorldFile::BUILTIN_NAMES {
+        explore_to_completion(world);
+    }
+}
+
+/// Explores `world` with the demo configuration and checks the result.
+fn explore_to_completion(world: &str) {
+    let mut config = demo_config().unwrap();
+    config.sim.world = world.to_string();
     let mut robot = VirtualRobot::new(&config).unwrap();
     let done = robot.run_until(config.daemon.max_run_time, |r| {
         r.live().exploration_complete()
@@ -27,7 +55,7 @@ fn the_demo_world_is_explored_to_completion_on_a_virtual_clock() {
     let on_walls = |tolerance| walls_on_world(map, &robot.world().world, origin, tolerance);
     let left = long_frontiers(map, config.exploration.planner.min_frontier_length);
     println!(
-        "{:.0} s virtual: {} scans, {:.1} m driven, {explorer:?}, mean error {:.3} m, max {:.3} m, \
+        "{world}: {:.0} s virtual: {} scans, {:.1} m driven, {explorer:?}, mean error {:.3} m, max {:.3} m, \
          max heading {:.2}°, {} walls {} frontiers {} loops, wall length on real walls: {:.1} % within 5 cm, \
          {:.1} % within 10 cm, {:.1} % within 15 cm; {} long frontiers left",
         stats.t,
@@ -44,10 +72,10 @@ fn the_demo_world_is_explored_to_completion_on_a_virtual_clock() {
         100.0 * on_walls(0.15),
         left.len()
     );
-    let svg = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("daemon-virtual-demo.svg");
+    let svg = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("daemon-{world}.svg"));
     std::fs::write(&svg, clsmap::map::cls::picture(map, None, None).to_svg()).unwrap();
     println!("picture: {}", svg.display());
-    assert!(done, "exploration did not complete");
+    assert!(done, "{world}: exploration did not complete");
     // Complete: every long frontier left was given up after its visits
     // (a wall piece left virtual a few cm off the wall can be one).
     let given_up = live.explorer().unwrap().given_up();
@@ -56,11 +84,9 @@ fn the_demo_world_is_explored_to_completion_on_a_virtual_clock() {
         "long frontiers left: {left:?}, given up: {given_up:?}"
     );
     assert_eq!(explorer.timed_out, 0);
-    // Down the corridors the far walls lie beyond the LMS200's 8.18 m, so
-    // the odometry's 2 % scale error shifts the map along them by up to
-    // ~15 cm; the walls themselves are straight and parallel.
-    assert!(on_walls(0.15) > 0.95, "{}", on_walls(0.15));
-    assert!(stats.mean_error < 0.12, "{stats:?}");
+    let (max_mean_error, min_on_walls) = expected(world);
+    assert!(on_walls(0.15) > min_on_walls, "{world}: {}", on_walls(0.15));
+    assert!(stats.mean_error < max_mean_error, "{world}: {stats:?}");
     assert!(stats.max_heading_error.to_degrees() < 1.0, "{stats:?}");
     assert!(live.mapper().summary().rejected_localizations * 100 < stats.scans as usize);
 }

@@ -6,6 +6,9 @@
 //! `Instant` only to time its stages), so the tokio daemon, the demo and a
 //! faster-than-real-time simulation all run the same code.
 
+use std::collections::VecDeque;
+use std::io::Write as _;
+use std::path::Path;
 use std::time::Duration;
 
 use clsmap_base::Twist;
@@ -18,7 +21,10 @@ use crate::geometry::{Pose2, RangeScan};
 use crate::input::ScanRecord;
 use crate::input::odometry::OdometryTrack;
 use crate::mapping_config::MapperConfig;
-use crate::pipeline::{OfflineMapper, PipelineError, ScanOutcome, write_outputs};
+use crate::pipeline::{
+    OfflineMapper, PipelineError, ScanOutcome, TRAJECTORY_FILE, create_output_dir, write_maps,
+};
+use crate::trajectory::{StampedPose, TUM_HEADER, write_tum_lines};
 
 /// How far (s) odometry is extrapolated past its newest sample to a scan's
 /// time: bases report at 10–50 Hz, so a scan often lies up to one period
@@ -57,7 +63,18 @@ pub struct LiveMapper {
     localized: u64,
     /// The last scan's time, its pose (map frame) and the odometry then.
     last_fix: Option<(f64, Pose2, Option<Pose2>)>,
+    /// Poses taken from the mapper and not yet appended to a trajectory
+    /// file (kept when an append fails, so none is lost).
+    unwritten: Vec<StampedPose>,
+    /// The path drawn on the map's picture: poses at least
+    /// [`PICTURE_STEP`] apart, the newest [`PICTURE_POSES`] of them.
+    picture_path: VecDeque<Pose2>,
 }
+
+/// Spacing (m) of the poses drawn on the map's picture.
+const PICTURE_STEP: f64 = 0.1;
+/// Poses drawn on the map's picture at most (a few hours of driving).
+const PICTURE_POSES: usize = 50_000;
 
 impl LiveMapper {
     /// A new map; with `exploration`, the robot explores from `now` (s).
@@ -78,6 +95,8 @@ impl LiveMapper {
             scans: 0,
             localized: 0,
             last_fix: None,
+            unwritten: Vec::new(),
+            picture_path: VecDeque::new(),
         }
     }
 
@@ -171,6 +190,15 @@ impl LiveMapper {
         self.scans += 1;
         self.localized += u64::from(outcome.localized);
         self.last_fix = Some((t, outcome.pose, odometry));
+        let far = self.picture_path.back().is_none_or(|p| {
+            (p.x - outcome.pose.x).hypot(p.y - outcome.pose.y) >= PICTURE_STEP
+        });
+        if far {
+            if self.picture_path.len() >= PICTURE_POSES {
+                self.picture_path.pop_front();
+            }
+            self.picture_path.push_back(outcome.pose);
+        }
         outcome
     }
 
@@ -223,12 +251,39 @@ impl LiveMapper {
         }
     }
 
-    /// Writes the map, its picture and the trajectory into `dir`, each file
-    /// atomically (a crash mid-write leaves the previous checkpoint).
-    pub fn checkpoint(&self, dir: &std::path::Path) -> Result<(), PipelineError> {
+    /// Writes a checkpoint into `dir`: the poses since the last one are
+    /// appended to [`TRAJECTORY_FILE`] (and synced), then the maps and the
+    /// picture are rewritten, each atomically, so a crash mid-write leaves
+    /// the previous checkpoint. The mapper forgets the poses written, so
+    /// memory stays bounded however long the daemon runs.
+    pub fn checkpoint(&mut self, dir: &Path) -> Result<(), PipelineError> {
         let _span = info_span!("checkpoint").entered();
-        write_outputs(dir, &self.mapper)
+        create_output_dir(dir)?;
+        self.unwritten.extend(self.mapper.take_trajectory());
+        let path = dir.join(TRAJECTORY_FILE);
+        append_tum(&path, &self.unwritten)
+            .map_err(|source| PipelineError::Output { path, source })?;
+        self.unwritten.clear();
+        let path: Vec<Pose2> = self.picture_path.iter().copied().collect();
+        write_maps(dir, &self.mapper, &path)
     }
+}
+
+/// Appends `poses` to the TUM file at `path` (created with its header if
+/// new) and syncs it.
+fn append_tum(path: &Path, poses: &[StampedPose]) -> std::io::Result<()> {
+    let mut file = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)?;
+    let mut text = Vec::new();
+    if file.metadata()?.len() == 0 {
+        text.extend_from_slice(TUM_HEADER.as_bytes());
+        text.push(b'\n');
+    }
+    write_tum_lines(&mut text, poses).map_err(std::io::Error::other)?;
+    file.write_all(&text)?;
+    file.sync_data()
 }
 
 fn log_event(event: &ExplorerEvent) {
@@ -270,6 +325,40 @@ mod tests {
         let ahead = live.odometry_at(0.25).unwrap();
         assert!((ahead.x - 0.125).abs() < 1e-9, "{ahead:?}");
         assert!(live.odometry_at(0.35).is_none(), "too far ahead");
+    }
+
+    #[test]
+    fn checkpoints_append_the_trajectory_and_keep_memory_bounded() {
+        use crate::sim::{Rng, ScanSpec, World, cast_scan};
+        let world = World::loop_around_block();
+        let mut rng = Rng::new(3);
+        let mut live = LiveMapper::new(MapperConfig::default(), None, 0.0);
+        let dir = std::env::temp_dir().join(format!("clsmap-live-ckpt-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut k = 0;
+        for round in 0..2 {
+            for _ in 0..10 {
+                let t = k as f64 * 0.1;
+                let pose = Pose2::new(1.0 + 0.05 * k as f64, 1.0, 0.0);
+                live.on_odometry(t, pose);
+                let scan = cast_scan(&world, &pose, &ScanSpec::lms200_half_degree(0.01), t, &mut rng);
+                live.on_scan(scan, Some(Duration::from_micros(300)));
+                k += 1;
+            }
+            live.checkpoint(&dir).unwrap();
+            assert!(live.mapper().trajectory().is_empty(), "round {round}");
+        }
+        let text = std::fs::read_to_string(dir.join(TRAJECTORY_FILE)).unwrap();
+        assert_eq!(text.lines().filter(|l| l.starts_with('#')).count(), 1);
+        assert_eq!(text.lines().filter(|l| !l.starts_with('#')).count(), 20);
+        let map = crate::map::cls::ClsMap::load(
+            &dir.join(crate::pipeline::MAP_FILE),
+            crate::map::cls::ClsMapConfig::default(),
+        )
+        .unwrap();
+        assert!(map.actual_segments().count() > 2);
+        assert!(live.latencies().summary(Stage::Pose).is_some());
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

@@ -283,7 +283,7 @@ fn replay_samples(
 /// Saves the map into `dir`; if that fails, into a rescue directory under
 /// the system's temporary directory, so a full or read-only state
 /// directory does not cost the map.
-fn save(live: &LiveMapper, dir: &Path) -> Result<PathBuf, DaemonError> {
+fn save(live: &mut LiveMapper, dir: &Path) -> Result<PathBuf, DaemonError> {
     match live.checkpoint(dir) {
         Ok(()) => Ok(dir.to_owned()),
         Err(first) => {
@@ -512,7 +512,7 @@ pub async fn run(config: DaemonConfig, mut hooks: Hooks<'_>) -> Result<RunSummar
     while let Ok(report) = report_rx.try_recv() {
         log_report(&report);
     }
-    let saved_in = save(&live, &out_dir)?;
+    let saved_in = save(&mut live, &out_dir)?;
     let status = live.status();
     info!(dir = %saved_in.display(), "{}", status_line(&status, 0.0, true));
     Ok(RunSummary {

@@ -210,6 +210,13 @@ impl VirtualRobot {
     /// mapped, then the base is polled and commanded, as the daemon's
     /// loop does.
     pub fn tick(&mut self) {
+        self.tick_with(|_, _| None);
+    }
+
+    /// [`tick`](Self::tick) with another controller: `drive(live, now)`
+    /// returning a velocity replaces the explorer's for this period (the
+    /// safety stops still apply).
+    pub fn tick_with(&mut self, drive: impl FnOnce(&LiveMapper, f64) -> Option<Twist>) {
         let next = self.now + self.tick;
         let until = self.instant(next);
         let mut scans = Vec::new();
@@ -236,10 +243,10 @@ impl VirtualRobot {
         let sensor_ok = self
             .last_scan_at
             .is_some_and(|t| self.now - t <= self.silence_stop);
-        let twist = if sensor_ok {
-            self.live.control(self.now).0
-        } else {
-            Twist::ZERO
+        let twist = match drive(&self.live, self.now) {
+            Some(twist) => twist,
+            None if sensor_ok => self.live.control(self.now).0,
+            None => Twist::ZERO,
         };
         let last_odometry = self.live.last_odometry_time();
         self.base
@@ -276,6 +283,12 @@ impl VirtualRobot {
             self.tick();
         }
         done(self)
+    }
+
+    /// Writes a checkpoint of the map and trajectory into `dir`, as the
+    /// daemon does every `checkpoint_interval`.
+    pub fn checkpoint(&mut self, dir: &Path) -> Result<(), crate::pipeline::PipelineError> {
+        self.live.checkpoint(dir)
     }
 
     /// Stops the base (the robot coasts to a halt within its limits).
