@@ -81,18 +81,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             && let Some(pose) = robot.live().pose_now()
         {
             let map = robot.live().mapper().cls_map();
-            let (lo, hi) = map
-                .loops()
-                .flat_map(|l| l.segments().iter())
-                .fold(([f64::MAX; 2], [f64::MIN; 2]), |(lo, hi), s| {
+            let (lo, hi) = map.loops().flat_map(|l| l.segments().iter()).fold(
+                ([f64::MAX; 2], [f64::MIN; 2]),
+                |(lo, hi), s| {
                     let p = s.start();
-                    ([lo[0].min(p[0]), lo[1].min(p[1])], [hi[0].max(p[0]), hi[1].max(p[1])])
-                });
+                    (
+                        [lo[0].min(p[0]), lo[1].min(p[1])],
+                        [hi[0].max(p[0]), hi[1].max(p[1])],
+                    )
+                },
+            );
             for _ in 0..50 {
-                let goal = [rng.uniform_range(lo[0], hi[0]), rng.uniform_range(lo[1], hi[1])];
+                let goal = [
+                    rng.uniform_range(lo[0], hi[0]),
+                    rng.uniform_range(lo[1], hi[1]),
+                ];
                 if let Ok(path) = plan_path(map, [pose.x, pose.y], goal, radius) {
                     let heading = rng.uniform_range(-PI, PI);
-                    route = Some(PathFollower::new(path, Pose2::new(goal[0], goal[1], heading)));
+                    route = Some(PathFollower::new(
+                        path,
+                        Pose2::new(goal[0], goal[1], heading),
+                    ));
                     break;
                 }
             }

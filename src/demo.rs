@@ -192,10 +192,10 @@ pub fn run_demo(
         .map_err(DaemonError::Runtime)?;
     let summary: RunSummary = runtime.block_on(run(config.clone(), hooks))?;
     let score = score.borrow();
-    if score.n == 0 {
+    let (Some(out_dir), true) = (summary.out_dir.clone(), score.n > 0) else {
         return Err(DemoError::NoScans);
-    }
-    let map = ClsMap::load(&summary.out_dir.join(MAP_FILE), ClsMapConfig::default())?;
+    };
+    let map = ClsMap::load(&out_dir.join(MAP_FILE), ClsMapConfig::default())?;
     let origin = score.origin.unwrap_or(world.start);
     let result = DemoSummary {
         world: world.name.clone(),
@@ -214,9 +214,9 @@ pub fn run_demo(
         max_heading_error_deg: score.max_heading.to_degrees(),
         walls_on_world: walls_on_world(&map, &world.world, origin, 0.05),
         latencies: summary.latencies,
-        out_dir: summary.out_dir.clone(),
+        out_dir: out_dir.clone(),
     };
-    let path = summary.out_dir.join("demo.json");
+    let path = out_dir.join("demo.json");
     let text = serde_json::to_string_pretty(&result).map_err(io::Error::from);
     text.and_then(|t| crate::durable::write_atomically(&path, (t + "\n").as_bytes()))
         .map_err(|source| DemoError::Io { path, source })?;

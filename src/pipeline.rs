@@ -23,7 +23,7 @@ use crate::geometry::{CogLine, LineExtractor, Pose2, wrap_angle};
 use crate::input::{InputError, ScanRecord, open_log};
 use crate::localize::{LocalizationResult, LocalizeError, SegmentIndex, localize};
 use crate::map::cls::{ClsMap, picture};
-use crate::map::{KeyframePolicy, SegmentMap};
+use crate::map::{KeyframePolicy, SegmentMap, SegmentMapFile};
 use crate::mapping_config::MapperConfig;
 use crate::trajectory::{StampedPose, TrajectoryError, write_tum};
 use nalgebra::{Matrix3, Vector3};
@@ -544,7 +544,7 @@ pub fn write_outputs(out_dir: &Path, mapper: &OfflineMapper) -> Result<(), Pipel
     write_tum(&mut tum, mapper.trajectory())?;
     write_file(&out_dir.join(TRAJECTORY_FILE), &tum)?;
     let poses: Vec<Pose2> = mapper.trajectory().iter().map(|(_, p)| *p).collect();
-    write_maps(out_dir, mapper, &poses)
+    write_maps(out_dir, &mapper.map().snapshot(), mapper.cls_map(), &poses)
 }
 
 /// Creates `out_dir` and its parents if needed.
@@ -558,11 +558,16 @@ pub fn create_output_dir(out_dir: &Path) -> Result<(), PipelineError> {
 /// Writes the maps into `out_dir`, each file atomically: the segment map
 /// ([`SEGMENTS_FILE`]), the CLS map ([`MAP_FILE`]) and its picture
 /// ([`PICTURE_FILE`]) with `path` drawn on it.
-pub fn write_maps(out_dir: &Path, mapper: &OfflineMapper, path: &[Pose2]) -> Result<(), PipelineError> {
-    let json = serde_json::to_vec_pretty(&mapper.map().snapshot())?;
+pub fn write_maps(
+    out_dir: &Path,
+    segments: &SegmentMapFile,
+    cls: &ClsMap,
+    path: &[Pose2],
+) -> Result<(), PipelineError> {
+    let json = serde_json::to_vec_pretty(segments)?;
     write_file(&out_dir.join(SEGMENTS_FILE), &json)?;
-    mapper.cls_map().save(&out_dir.join(MAP_FILE))?;
-    let pic = picture(mapper.cls_map(), Some(path), path.last().copied());
+    cls.save(&out_dir.join(MAP_FILE))?;
+    let pic = picture(cls, Some(path), path.last().copied());
     write_file(&out_dir.join(PICTURE_FILE), pic.to_svg().as_bytes())
 }
 

@@ -31,7 +31,10 @@ pub const TUM_HEADER: &str = "# timestamp x y z qx qy qz qw";
 
 /// The pose lines of [`write_tum`] without the header, for appending to a
 /// trajectory file.
-pub fn write_tum_lines<W: Write>(out: &mut W, poses: &[StampedPose]) -> Result<(), TrajectoryError> {
+pub fn write_tum_lines<W: Write>(
+    out: &mut W,
+    poses: &[StampedPose],
+) -> Result<(), TrajectoryError> {
     for (t, p) in poses {
         let (s, c) = (p.theta / 2.0).sin_cos();
         writeln!(out, "{t:.6} {:.6} {:.6} 0 0 0 {s:.9} {c:.9}", p.x, p.y)?;

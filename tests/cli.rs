@@ -1062,7 +1062,7 @@ fn run_reloads_on_sighup_and_stops_cleanly_on_sigterm_leaving_a_loadable_map() {
     let config = demo_run_config(&dir, "");
     let mut daemon = Daemon::start(&config);
     daemon.wait_for("first scan mapped", Duration::from_secs(60));
-    daemon.wait_for("exploration: new goal", Duration::from_secs(60));
+    daemon.wait_for("exploration: goal reached", Duration::from_secs(60));
     // A tunable change is applied; a change of the sensor needs a restart.
     let text = std::fs::read_to_string(&config).unwrap();
     std::fs::write(
@@ -1081,7 +1081,10 @@ fn run_reloads_on_sighup_and_stops_cleanly_on_sigterm_leaving_a_loadable_map() {
     daemon.signal("HUP");
     daemon.wait_for("reload refused", Duration::from_secs(20));
     daemon.wait_for("sensor.baud (line 2)", Duration::from_secs(1));
-    daemon.wait_for("exploration: goal reached", Duration::from_secs(60));
+    // Turning exploration off takes effect at once.
+    std::fs::write(&config, text.replace("enabled = true", "enabled = false")).unwrap();
+    daemon.signal("HUP");
+    daemon.wait_for("exploration off", Duration::from_secs(20));
     daemon.signal("TERM");
     let (status, stdout, stderr) = daemon.finish(Duration::from_secs(30));
     assert!(status.success(), "{status}\n{stderr}");
@@ -1108,7 +1111,7 @@ fn run_without_its_sensor_keeps_retrying_and_still_stops_cleanly() {
         &config,
         format!(
             "[sensor]\nport = \"/dev/clsmap-test-no-such-port\"\nretry_initial = 0.2\nretry_max = 0.4\n\
-             [daemon]\nstate_dir = {:?}\n",
+             [daemon]\nstate_dir = {:?}\nstatus_interval = 0.2\n",
             dir.join("state").display().to_string()
         ),
     )
@@ -1119,20 +1122,20 @@ fn run_without_its_sensor_keeps_retrying_and_still_stops_cleanly() {
     // Retried, not given up: more failures come after the back-off.
     std::thread::sleep(Duration::from_millis(800));
     daemon.signal("TERM");
-    let (status, _, stderr) = daemon.finish(Duration::from_secs(30));
+    let (status, stdout, stderr) = daemon.finish(Duration::from_secs(30));
     assert!(status.success(), "{status}\n{stderr}");
     assert!(
         stderr.matches("trying again").count() >= 2,
         "expected retries:\n{stderr}"
     );
-    // An empty map is still a valid map file.
-    let run = run_dir(&dir.join("state"));
-    let map = clsmap::map::cls::ClsMap::load(
-        &run.join("map.json"),
-        clsmap::map::cls::ClsMapConfig::default(),
-    )
-    .unwrap();
-    assert_eq!(map.actual_segments().count(), 0);
+    assert!(
+        stderr.contains("waiting for the sensor") || stderr.contains("SENSOR FAILING"),
+        "{stderr}"
+    );
+    // Nothing was mapped: no empty run directory is left behind.
+    assert!(stdout.contains("nothing mapped, nothing saved"), "{stdout}");
+    let runs = std::fs::read_dir(dir.join("state")).unwrap().count();
+    assert_eq!(runs, 0);
 }
 
 #[test]

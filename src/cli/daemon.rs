@@ -5,7 +5,7 @@ use std::path::Path;
 use std::process::ExitCode;
 
 use anyhow::Context as _;
-use clsmap::daemon::{DaemonConfig, Hooks, RunSummary, run};
+use clsmap::daemon::{DaemonConfig, Hooks, RunSummary, StopReason, run};
 use tokio::signal::unix::{SignalKind, signal};
 use tokio::sync::mpsc;
 use tracing::info;
@@ -27,6 +27,18 @@ pub fn run_daemon(config_path: &Path) -> anyhow::Result<ExitCode> {
         run(config, hooks).await.context("the daemon failed")
     })?;
     report(&summary);
+    if let Some(why) = &summary.rescued_because {
+        anyhow::bail!(
+            "the map could not be saved where it belongs ({why}); it was rescued to {}",
+            summary
+                .out_dir
+                .as_deref()
+                .map_or_else(|| "?".into(), |d| d.display().to_string())
+        );
+    }
+    if summary.reason == StopReason::SensorThreadEnded {
+        anyhow::bail!("the sensor thread ended unexpectedly (the map was saved)");
+    }
     Ok(ExitCode::SUCCESS)
 }
 
@@ -60,7 +72,7 @@ pub fn signal_hooks(config_path: Option<&Path>) -> anyhow::Result<Hooks<'static>
 fn report(s: &RunSummary) {
     println!(
         "stopped ({:?}) after {:.1} s: {} scans mapped ({} skipped while busy), \
-         map {} walls, {} frontiers, {} loops; saved in {}",
+         map {} walls, {} frontiers, {} loops; {}",
         s.reason,
         s.run_time,
         s.scans,
@@ -68,7 +80,10 @@ fn report(s: &RunSummary) {
         s.status.walls,
         s.status.frontiers,
         s.status.loops,
-        s.out_dir.display()
+        s.out_dir.as_deref().map_or_else(
+            || "nothing mapped, nothing saved".to_string(),
+            |d| format!("saved in {}", d.display())
+        )
     );
     for l in &s.latencies {
         println!(

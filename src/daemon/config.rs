@@ -48,7 +48,8 @@ pub struct SensorConfig {
     /// Serial device (default /dev/lms200, the udev rule's name).
     pub port: PathBuf,
     /// Line speed while streaming (Bd): 9600, 19200, 38400 or 500000
-    /// (default 500000: 75 scans/s at 180°/0.5°; RS-422 only).
+    /// (default 500000: the only speed that carries every scan, 37.5 scans/s
+    /// at 180°/0.5° and 75 at 180°/1°; RS-422 only).
     pub baud: u32,
     /// Field of view (deg): 100 or 180 (default 180).
     pub field_of_view: u16,
@@ -57,7 +58,7 @@ pub struct SensorConfig {
     /// Range units: "mm" (8.183 m range, default) or "cm" (81.83 m).
     pub units: String,
     /// No scan for this long (s) stops the base until scans return
-    /// (default 0.5 s: about 37 missed scans at 75 scans/s).
+    /// (default 0.5 s: about 19 missed scans at 180°/0.5°).
     pub silence_stop: f64,
     /// First and longest wait (s) before opening the port again after it
     /// failed (unplugged, busy); the wait doubles in between (default 1 s
@@ -289,18 +290,11 @@ impl DaemonConfig {
             value,
             rule: rule.to_string(),
         };
-        let positive = |key: &str, v: f64| {
-            if v.is_finite() && v > 0.0 {
+        let within = |key: &str, v: f64, lo: f64, hi: f64| {
+            if v.is_finite() && (lo..=hi).contains(&v) {
                 Ok(())
             } else {
-                Err(range(key, v.to_string(), "> 0"))
-            }
-        };
-        let non_negative = |key: &str, v: f64| {
-            if v.is_finite() && v >= 0.0 {
-                Ok(())
-            } else {
-                Err(range(key, v.to_string(), ">= 0"))
+                Err(range(key, v.to_string(), &format!("in [{lo}, {hi}]")))
             }
         };
         let s = &self.sensor;
@@ -328,26 +322,23 @@ impl DaemonConfig {
                 "\"mm\" or \"cm\"",
             ));
         }
-        positive("sensor.silence_stop", s.silence_stop)?;
-        positive("sensor.retry_initial", s.retry_initial)?;
-        positive("sensor.retry_max", s.retry_max)?;
-        if s.retry_max < s.retry_initial {
-            return Err(range(
-                "sensor.retry_max",
-                s.retry_max.to_string(),
-                ">= sensor.retry_initial",
-            ));
-        }
+        // Ranges: beyond them a value is a typo, not a choice (and some
+        // would overflow a timer).
+        within("sensor.silence_stop", s.silence_stop, 0.05, 60.0)?;
+        within("sensor.retry_initial", s.retry_initial, 0.01, 3600.0)?;
+        within("sensor.retry_max", s.retry_max, s.retry_initial, 3600.0)?;
         let b = &self.base;
-        positive("base.rate", b.rate)?;
-        if b.rate > 1000.0 {
-            return Err(range("base.rate", b.rate.to_string(), "<= 1000 Hz"));
-        }
-        positive("base.stale_odometry", b.stale_odometry)?;
-        positive("base.max_speed", b.max_speed)?;
-        positive("base.max_turn_rate", b.max_turn_rate)?;
-        positive("base.max_acceleration", b.max_acceleration)?;
-        positive("base.max_angular_acceleration", b.max_angular_acceleration)?;
+        within("base.rate", b.rate, 2.0, 1000.0)?;
+        within("base.stale_odometry", b.stale_odometry, 0.01, 10.0)?;
+        within("base.max_speed", b.max_speed, 1e-3, 5.0)?;
+        within("base.max_turn_rate", b.max_turn_rate, 1e-3, 10.0)?;
+        within("base.max_acceleration", b.max_acceleration, 1e-3, 20.0)?;
+        within(
+            "base.max_angular_acceleration",
+            b.max_angular_acceleration,
+            1e-3,
+            50.0,
+        )?;
         if b.adapter == BaseKind::Replay && b.replay.is_none() {
             return Err(DaemonConfigError::Invalid {
                 key: "base.replay".into(),
@@ -365,7 +356,7 @@ impl DaemonConfig {
             });
         }
         let m = &self.sim;
-        non_negative("sim.range_sigma", m.range_sigma)?;
+        within("sim.range_sigma", m.range_sigma, 0.0, 1.0)?;
         if !m.odometry_scale_error.is_finite() || m.odometry_scale_error.abs() >= 0.5 {
             return Err(range(
                 "sim.odometry_scale_error",
@@ -413,9 +404,16 @@ impl DaemonConfig {
             });
         }
         let d = &self.daemon;
-        non_negative("daemon.checkpoint_interval", d.checkpoint_interval)?;
-        positive("daemon.status_interval", d.status_interval)?;
-        non_negative("daemon.max_run_time", d.max_run_time)?;
+        if d.checkpoint_interval != 0.0 {
+            within(
+                "daemon.checkpoint_interval",
+                d.checkpoint_interval,
+                1.0,
+                86_400.0,
+            )?;
+        }
+        within("daemon.status_interval", d.status_interval, 0.1, 86_400.0)?;
+        within("daemon.max_run_time", d.max_run_time, 0.0, 1e9)?;
         self.mapper.validate().map_err(|e| {
             let key = match &e {
                 crate::mapping_config::ConfigError::Range { key, .. } => mapper_key(key),

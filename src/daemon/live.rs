@@ -7,7 +7,6 @@
 //! faster-than-real-time simulation all run the same code.
 
 use std::collections::VecDeque;
-use std::io::Write as _;
 use std::path::Path;
 use std::time::Duration;
 
@@ -15,16 +14,15 @@ use clsmap_base::Twist;
 use serde::Serialize;
 use tracing::{info, info_span, warn};
 
+use super::checkpoint::{Checkpoint, CheckpointFailed};
 use super::latency::{Latencies, Stage};
 use crate::explore::{DriveConfig, ExplorationConfig, Explorer, ExplorerEvent, ExplorerStats};
 use crate::geometry::{Pose2, RangeScan};
 use crate::input::ScanRecord;
 use crate::input::odometry::OdometryTrack;
 use crate::mapping_config::MapperConfig;
-use crate::pipeline::{
-    OfflineMapper, PipelineError, ScanOutcome, TRAJECTORY_FILE, create_output_dir, write_maps,
-};
-use crate::trajectory::{StampedPose, TUM_HEADER, write_tum_lines};
+use crate::pipeline::{OfflineMapper, PipelineError, ScanOutcome};
+use crate::trajectory::StampedPose;
 
 /// How far (s) odometry is extrapolated past its newest sample to a scan's
 /// time: bases report at 10–50 Hz, so a scan often lies up to one period
@@ -112,16 +110,9 @@ impl LiveMapper {
         self.explorer.as_ref()
     }
 
-    /// Takes the tunable parts of new configurations (SIGHUP); returns the
-    /// mapper keys that need a restart to change.
-    pub fn retune(
-        &mut self,
-        mapper: MapperConfig,
-        exploration: Option<(ExplorationConfig, DriveConfig)>,
-    ) -> Vec<&'static str> {
-        if let (Some(ex), Some((planner, drive))) = (self.explorer.as_mut(), exploration) {
-            ex.retune(planner, drive);
-        }
+    /// Takes the tunable parts of a new mapper configuration (SIGHUP);
+    /// returns the keys that need a restart to change.
+    pub fn retune(&mut self, mapper: MapperConfig) -> Vec<&'static str> {
         self.mapper.retune(mapper)
     }
 
@@ -190,9 +181,10 @@ impl LiveMapper {
         self.scans += 1;
         self.localized += u64::from(outcome.localized);
         self.last_fix = Some((t, outcome.pose, odometry));
-        let far = self.picture_path.back().is_none_or(|p| {
-            (p.x - outcome.pose.x).hypot(p.y - outcome.pose.y) >= PICTURE_STEP
-        });
+        let far = self
+            .picture_path
+            .back()
+            .is_none_or(|p| (p.x - outcome.pose.x).hypot(p.y - outcome.pose.y) >= PICTURE_STEP);
         if far {
             if self.picture_path.len() >= PICTURE_POSES {
                 self.picture_path.pop_front();
@@ -251,39 +243,58 @@ impl LiveMapper {
         }
     }
 
-    /// Writes a checkpoint into `dir`: the poses since the last one are
-    /// appended to [`TRAJECTORY_FILE`] (and synced), then the maps and the
-    /// picture are rewritten, each atomically, so a crash mid-write leaves
-    /// the previous checkpoint. The mapper forgets the poses written, so
-    /// memory stays bounded however long the daemon runs.
+    /// A snapshot for a checkpoint into `dir`: the poses since the last
+    /// one (the mapper forgets them, so memory stays bounded however long
+    /// the daemon runs), the maps and the picture's path.
+    pub fn begin_checkpoint(&mut self, dir: &Path) -> Checkpoint {
+        let mut trajectory = std::mem::take(&mut self.unwritten);
+        trajectory.extend(self.mapper.take_trajectory());
+        Checkpoint {
+            dir: dir.to_owned(),
+            trajectory,
+            segments: self.mapper.map().snapshot(),
+            cls: self.mapper.cls_map().clone(),
+            path: self.picture_path.iter().copied().collect(),
+        }
+    }
+
+    /// Takes back the poses of a checkpoint that failed, to be written
+    /// with the next one.
+    pub fn checkpoint_failed(&mut self, failed: CheckpointFailed) -> PipelineError {
+        let mut poses = failed.trajectory;
+        poses.append(&mut self.unwritten);
+        self.unwritten = poses;
+        failed.error
+    }
+
+    /// Writes a checkpoint into `dir` now (see [`Checkpoint::write`]).
     pub fn checkpoint(&mut self, dir: &Path) -> Result<(), PipelineError> {
         let _span = info_span!("checkpoint").entered();
-        create_output_dir(dir)?;
-        self.unwritten.extend(self.mapper.take_trajectory());
-        let path = dir.join(TRAJECTORY_FILE);
-        append_tum(&path, &self.unwritten)
-            .map_err(|source| PipelineError::Output { path, source })?;
-        self.unwritten.clear();
-        let path: Vec<Pose2> = self.picture_path.iter().copied().collect();
-        write_maps(dir, &self.mapper, &path)
+        self.begin_checkpoint(dir)
+            .write()
+            .map_err(|failed| self.checkpoint_failed(failed))
     }
-}
 
-/// Appends `poses` to the TUM file at `path` (created with its header if
-/// new) and syncs it.
-fn append_tum(path: &Path, poses: &[StampedPose]) -> std::io::Result<()> {
-    let mut file = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(path)?;
-    let mut text = Vec::new();
-    if file.metadata()?.len() == 0 {
-        text.extend_from_slice(TUM_HEADER.as_bytes());
-        text.push(b'\n');
+    /// Starts exploring (from `now`, s) or stops; a running explorer is
+    /// retuned, keeping its memory of frontiers and its goal.
+    pub fn set_exploration(
+        &mut self,
+        exploration: Option<(ExplorationConfig, DriveConfig)>,
+        now: f64,
+    ) {
+        match (self.explorer.as_mut(), exploration) {
+            (Some(ex), Some((planner, drive))) => ex.retune(planner, drive),
+            (None, Some((planner, drive))) => {
+                info!("exploration on");
+                self.explorer = Some(Explorer::new(planner, drive, now));
+            }
+            (Some(_), None) => {
+                info!("exploration off");
+                self.explorer = None;
+            }
+            (None, None) => {}
+        }
     }
-    write_tum_lines(&mut text, poses).map_err(std::io::Error::other)?;
-    file.write_all(&text)?;
-    file.sync_data()
 }
 
 fn log_event(event: &ExplorerEvent) {
@@ -341,14 +352,20 @@ mod tests {
                 let t = k as f64 * 0.1;
                 let pose = Pose2::new(1.0 + 0.05 * k as f64, 1.0, 0.0);
                 live.on_odometry(t, pose);
-                let scan = cast_scan(&world, &pose, &ScanSpec::lms200_half_degree(0.01), t, &mut rng);
+                let scan = cast_scan(
+                    &world,
+                    &pose,
+                    &ScanSpec::lms200_half_degree(0.01),
+                    t,
+                    &mut rng,
+                );
                 live.on_scan(scan, Some(Duration::from_micros(300)));
                 k += 1;
             }
             live.checkpoint(&dir).unwrap();
             assert!(live.mapper().trajectory().is_empty(), "round {round}");
         }
-        let text = std::fs::read_to_string(dir.join(TRAJECTORY_FILE)).unwrap();
+        let text = std::fs::read_to_string(dir.join(crate::pipeline::TRAJECTORY_FILE)).unwrap();
         assert_eq!(text.lines().filter(|l| l.starts_with('#')).count(), 1);
         assert_eq!(text.lines().filter(|l| !l.starts_with('#')).count(), 20);
         let map = crate::map::cls::ClsMap::load(

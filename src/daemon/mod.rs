@@ -1,6 +1,7 @@
 //! The robot daemon (`clsmap run`) and the loop the demo runs.
 //!
 //! - [`base_driver`]: [`BaseDriver`](base_driver::BaseDriver), commands with limits and safety stops.
+//! - [`checkpoint`]: map snapshots written off the loop.
 //! - [`config`]: [`DaemonConfig`], the TOML file, checked with key and line.
 //! - [`live`]: [`LiveMapper`], the loop's work without the loop (sans-IO).
 //! - [`latency`]: per-stage latency histograms.
@@ -11,6 +12,7 @@
 //!   time, for tests and soak runs.
 
 pub mod base_driver;
+pub mod checkpoint;
 pub mod config;
 pub mod latency;
 pub mod live;

@@ -2,25 +2,28 @@
 //! the explorer, checkpoints, status and systemd, wired together.
 //!
 //! One current-thread runtime runs the loop; the serial driver runs on its
-//! own thread (it blocks on the port) and hands over only the newest scan.
-//! The loop reacts to: a new scan (localize, maybe grow the map), a base
-//! tick (poll odometry, command the base), a status tick, a checkpoint
-//! tick, sensor reports, a reload request and the shutdown future. On
-//! shutdown it stops the base, closes the sensor link and saves the map.
+//! own thread (it blocks on the port) and hands over only the newest scan;
+//! checkpoints are written on a blocking thread. The loop reacts to: a new
+//! scan (localize, maybe grow the map), a base tick (poll odometry,
+//! command the base, ping the watchdog), a status tick, a checkpoint tick
+//! and its completion, sensor reports, a reload request and the shutdown
+//! future. On shutdown it stops the base, stops the sensor, saves the map.
 
 use std::future::Future;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use clsmap_base::{BaseAdapter, LineBase, ReplayBase, Twist};
-use lms200::link::{Event, LinkStats};
+use clsmap_base::{BaseAdapter, LineBase, ReplayBase};
+use lms200::link::Event;
 use lms200::pty::PtyEmulator;
 use serde::Serialize;
 use tokio::sync::{mpsc, watch};
+use tokio::task::JoinHandle;
 use tokio::time::MissedTickBehavior;
 use tracing::{error, info, info_span, warn};
 
-use super::base_driver::BaseDriver;
+use super::base_driver::{BaseConnector, BaseDriver};
+use super::checkpoint::CheckpointFailed;
 use super::config::{BaseKind, DaemonConfig, SensorSource};
 use super::latency::StageSummary;
 use super::live::{LiveMapper, LiveStatus};
@@ -34,7 +37,7 @@ use crate::sim::SimRobot;
 /// Why the daemon could not start or finish.
 #[derive(Debug, thiserror::Error)]
 pub enum DaemonError {
-    #[error("cannot create the output directory {path}")]
+    #[error("cannot write to {path}")]
     OutputDir {
         path: PathBuf,
         #[source]
@@ -46,14 +49,14 @@ pub enum DaemonError {
     UnknownWorld(String, String),
     #[error("cannot start the emulated LMS200")]
     Emulator(#[from] lms200::pty::PtyError),
-    #[error("cannot start the base adapter: {0}")]
-    Base(String),
     #[error("cannot read the odometry to replay from {path}")]
     Replay {
         path: PathBuf,
         #[source]
         source: crate::input::InputError,
     },
+    #[error("the odometry to replay is unusable: {0}")]
+    ReplayOdometry(String),
     #[error("cannot start the sensor thread")]
     Thread(#[source] std::io::Error),
     #[error("cannot start the async runtime")]
@@ -71,6 +74,9 @@ pub enum StopReason {
     ExplorationComplete,
     /// `max_run_time` passed.
     TimeLimit,
+    /// The sensor thread ended on its own (a bug): the map was saved and
+    /// the daemon exits with an error for systemd to restart it.
+    SensorThreadEnded,
 }
 
 /// What the loop reports after each scan (for live progress).
@@ -91,7 +97,10 @@ pub struct ScanProgress {
 #[derive(Debug, Clone, Serialize)]
 pub struct RunSummary {
     pub reason: StopReason,
-    pub out_dir: PathBuf,
+    /// Where the map was saved; `None` when nothing was mapped.
+    pub out_dir: Option<PathBuf>,
+    /// Why the map went to a rescue directory instead of its own, if it did.
+    pub rescued_because: Option<String>,
     pub status: LiveStatus,
     /// Scans the loop took up, and scans replaced in the mailbox before it
     /// could (latest scan wins).
@@ -152,8 +161,10 @@ pub fn run_blocking(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary
     runtime.block_on(run(config, hooks))
 }
 
-/// A name for this run's directory: `run-YYYYmmddTHHMMSSZ` (UTC).
-fn run_dir_name() -> String {
+/// A name for a run's directory: `run-YYYYmmddTHHMMSSZ-<pid>` (UTC; the
+/// process id keeps names apart on a robot whose clock restarts at the
+/// same time after every boot).
+fn run_dir_name(prefix: &str) -> String {
     let secs = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_secs())
@@ -170,48 +181,52 @@ fn run_dir_name() -> String {
     let m = if mp < 10 { mp + 3 } else { mp - 9 };
     let y = yoe + era * 400 + i64::from(m <= 2);
     format!(
-        "run-{y:04}{m:02}{d:02}T{:02}{:02}{:02}Z",
+        "{prefix}-{y:04}{m:02}{d:02}T{:02}{:02}{:02}Z-{}",
         rem / 3600,
         rem % 3600 / 60,
-        rem % 60
+        rem % 60,
+        std::process::id()
     )
 }
 
-/// A new directory for this run below `state`: never an existing one.
-fn new_run_dir(state: &Path) -> Result<PathBuf, DaemonError> {
-    let base = run_dir_name();
-    let mut last_error = None;
-    for k in 0..100 {
-        let name = if k == 0 {
+/// A new directory below `parent`, never an existing one.
+fn new_dir(parent: &Path, prefix: &str) -> std::io::Result<PathBuf> {
+    std::fs::create_dir_all(parent)?;
+    let base = run_dir_name(prefix);
+    for k in 0..10_000 {
+        let dir = parent.join(if k == 0 {
             base.clone()
         } else {
             format!("{base}-{k}")
-        };
-        let dir = state.join(name);
-        if let Err(source) = std::fs::create_dir_all(state) {
-            return Err(DaemonError::OutputDir {
-                path: state.to_owned(),
-                source,
-            });
-        }
+        });
         match std::fs::create_dir(&dir) {
             Ok(()) => return Ok(dir),
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
-            Err(e) => last_error = Some((dir, e)),
+            Err(e) => return Err(e),
         }
     }
-    let (path, source) = last_error.unwrap_or_else(|| {
-        (
-            state.join(base),
-            std::io::Error::new(std::io::ErrorKind::AlreadyExists, "every name is taken"),
-        )
-    });
-    Err(DaemonError::OutputDir { path, source })
+    Err(std::io::Error::new(
+        std::io::ErrorKind::AlreadyExists,
+        "every run directory name is taken",
+    ))
+}
+
+/// Fails early, before the sensor is touched, when `dir` cannot be
+/// written: a map that cannot be saved is worse than no start.
+fn check_writable(dir: &Path) -> Result<(), DaemonError> {
+    let fail = |source| DaemonError::OutputDir {
+        path: dir.to_owned(),
+        source,
+    };
+    std::fs::create_dir_all(dir).map_err(fail)?;
+    let probe = dir.join(format!(".clsmap-write-test-{}", std::process::id()));
+    std::fs::write(&probe, b"").map_err(fail)?;
+    std::fs::remove_file(&probe).map_err(fail)
 }
 
 /// Everything the loop owns besides the mapper.
 struct Rig {
-    base: Option<Box<dyn BaseAdapter + Send>>,
+    base: Option<BaseConnector>,
     robot: Option<SimRobot>,
     /// Keeps the emulator's pty open while the daemon runs.
     _pty: Option<PtyEmulator>,
@@ -222,7 +237,7 @@ fn build_rig(config: &DaemonConfig, t0: Instant) -> Result<Rig, DaemonError> {
     let mut robot = None;
     let mut pty = None;
     let mut sensor_port = config.sensor.port.clone();
-    let base: Option<Box<dyn BaseAdapter + Send>> = match config.base.adapter {
+    let base: Option<BaseConnector> = match config.base.adapter {
         BaseKind::Sim => {
             let (sim, world) = simulated_robot(config)?;
             if config.sensor.source == SensorSource::Emulator {
@@ -233,25 +248,35 @@ fn build_rig(config: &DaemonConfig, t0: Instant) -> Result<Rig, DaemonError> {
             }
             let base = sim.base();
             robot = Some(sim);
-            Some(Box::new(base))
+            Some(BaseDriver::once(Box::new(base)))
         }
-        BaseKind::Tcp => Some(Box::new(
-            LineBase::connect_tcp(&config.base.address, Duration::from_secs(5))
-                .map_err(|e| DaemonError::Base(e.to_string()))?,
-        )),
-        BaseKind::Serial => Some(Box::new(
-            LineBase::open_serial(&config.base.port, config.base.baud)
-                .map_err(|e| DaemonError::Base(e.to_string()))?,
-        )),
+        // Connected by the loop, and again after a failure: a bridge that
+        // starts after the daemon is picked up.
+        BaseKind::Tcp => {
+            let address = config.base.address.clone();
+            Some(Box::new(move || {
+                LineBase::connect_tcp(&address, Duration::from_millis(300))
+                    .map(|b| Box::new(b) as Box<dyn BaseAdapter + Send>)
+                    .map_err(|e| e.to_string())
+            }))
+        }
+        BaseKind::Serial => {
+            let (port, baud) = (config.base.port.clone(), config.base.baud);
+            Some(Box::new(move || {
+                LineBase::open_serial(&port, baud)
+                    .map(|b| Box::new(b) as Box<dyn BaseAdapter + Send>)
+                    .map_err(|e| e.to_string())
+            }))
+        }
         BaseKind::Replay => {
             let path = config.base.replay.clone().unwrap_or_default();
             let samples = replay_samples(&path).map_err(|source| DaemonError::Replay {
                 path: path.clone(),
                 source,
             })?;
-            Some(Box::new(
-                ReplayBase::new(samples).map_err(|e| DaemonError::Base(e.to_string()))?,
-            ))
+            let base =
+                ReplayBase::new(samples).map_err(|e| DaemonError::ReplayOdometry(e.to_string()))?;
+            Some(BaseDriver::once(Box::new(base)))
         }
         BaseKind::None => None,
     };
@@ -280,31 +305,7 @@ fn replay_samples(
     Ok(samples)
 }
 
-/// Saves the map into `dir`; if that fails, into a rescue directory under
-/// the system's temporary directory, so a full or read-only state
-/// directory does not cost the map.
-fn save(live: &mut LiveMapper, dir: &Path) -> Result<PathBuf, DaemonError> {
-    match live.checkpoint(dir) {
-        Ok(()) => Ok(dir.to_owned()),
-        Err(first) => {
-            let first = error_chain(&first);
-            error!(dir = %dir.display(), "cannot save the map: {first}");
-            let rescue = std::env::temp_dir().join(format!("clsmap-rescue-{}", run_dir_name()));
-            match live.checkpoint(&rescue) {
-                Ok(()) => {
-                    error!(dir = %rescue.display(), "map saved to a rescue directory instead");
-                    Ok(rescue)
-                }
-                Err(second) => Err(DaemonError::Save {
-                    tried: format!("{} and {}", dir.display(), rescue.display()),
-                    error: format!("{first}; {}", error_chain(&second)),
-                }),
-            }
-        }
-    }
-}
-
-fn status_line(s: &LiveStatus, rate: f64, sensor_ok: bool) -> String {
+fn status_line(s: &LiveStatus, rate: f64, sensor: &str) -> String {
     let pose = s.pose.map_or_else(
         || "no pose yet".to_string(),
         |p| {
@@ -324,55 +325,314 @@ fn status_line(s: &LiveStatus, rate: f64, sensor_ok: bool) -> String {
         ""
     };
     format!(
-        "{} {:.1} scans/s, {} scans ({} localized), map {} walls {} frontiers {} loops, {pose}{exploring}",
-        if sensor_ok {
-            "streaming"
-        } else {
-            "SENSOR SILENT"
-        },
-        rate,
-        s.scans,
-        s.localized,
-        s.walls,
-        s.frontiers,
-        s.loops
+        "{sensor} {rate:.1} scans/s, {} scans ({} localized), map {} walls {} frontiers {} loops, {pose}{exploring}",
+        s.scans, s.localized, s.walls, s.frontiers, s.loops
     )
 }
 
 fn tick_every(seconds: f64) -> tokio::time::Interval {
-    let mut i = tokio::time::interval(Duration::from_secs_f64(seconds.max(1e-3)));
+    let period =
+        Duration::try_from_secs_f64(seconds.max(1e-3)).unwrap_or(Duration::from_secs(3600));
+    let mut i = tokio::time::interval(period);
     i.set_missed_tick_behavior(MissedTickBehavior::Skip);
     i
+}
+
+/// The loop's state.
+struct Daemon {
+    config: DaemonConfig,
+    t0: Instant,
+    live: LiveMapper,
+    base: BaseDriver,
+    notifier: Notifier,
+    robot: Option<SimRobot>,
+    mode: lms200::MeasuringMode,
+    /// The run's directory: given, or made at the first checkpoint.
+    out_dir: Option<PathBuf>,
+    state_dir: PathBuf,
+    last_seq: u64,
+    skipped: u64,
+    last_scan_at: Option<f64>,
+    first_scan_after: Option<f64>,
+    silence_logged: bool,
+    /// The sensor thread's last failure, for the status line.
+    sensor_trouble: Option<String>,
+    scans_at_last_status: u64,
+    last_status_t: f64,
+}
+
+impl Daemon {
+    fn clock(&self) -> f64 {
+        self.t0.elapsed().as_secs_f64()
+    }
+
+    fn sensor_ok(&self, now: f64) -> bool {
+        self.last_scan_at
+            .is_some_and(|t| now - t <= self.config.sensor.silence_stop)
+    }
+
+    fn on_scan(&mut self, slot: &ScanSlot, hook: &mut Option<ScanHook<'_>>) {
+        self.skipped += slot.seq.saturating_sub(self.last_seq + 1);
+        self.last_seq = slot.seq;
+        let now = self.clock();
+        self.base.poll(now, &mut self.live);
+        let t = slot
+            .scan
+            .timestamp
+            .saturating_duration_since(self.t0)
+            .as_secs_f64();
+        let Some(scan) = range_scan(&slot.scan.scan, t, self.mode) else {
+            return;
+        };
+        let queued = slot.scan.received_at.elapsed();
+        let outcome = self.live.on_scan(scan, Some(queued));
+        if self.first_scan_after.is_none() {
+            self.first_scan_after = Some(now);
+            info!(after_s = now, "first scan mapped; ready");
+            self.notifier.ready();
+        }
+        if self.silence_logged {
+            info!("scans are back");
+            self.silence_logged = false;
+        }
+        self.sensor_trouble = None;
+        self.last_scan_at = Some(now);
+        if let Some(hook) = hook.as_mut() {
+            hook(&ScanProgress {
+                t: now,
+                pose: outcome.pose,
+                truth: self.robot.as_ref().map(|r| r.true_pose_at(t)),
+                localized: outcome.localized,
+                status: self.live.status(),
+            });
+        }
+    }
+
+    /// Polls and commands the base; returns why to stop, if it is time.
+    fn on_base_tick(&mut self) -> Option<StopReason> {
+        let _span = info_span!("control").entered();
+        let now = self.clock();
+        self.notifier.loop_alive(Instant::now());
+        self.base.poll(now, &mut self.live);
+        let sensor_ok = self.sensor_ok(now);
+        if !sensor_ok && self.last_scan_at.is_some() && !self.silence_logged {
+            warn!(
+                silent_s = self.config.sensor.silence_stop,
+                "no scan: the base stops until scans return"
+            );
+            self.silence_logged = true;
+        }
+        self.base.control(&mut self.live, sensor_ok, now, None);
+        if self.config.exploration.exit_when_complete && self.live.exploration_complete() {
+            return Some(StopReason::ExplorationComplete);
+        }
+        let limit = self.config.daemon.max_run_time;
+        (limit > 0.0 && now >= limit).then_some(StopReason::TimeLimit)
+    }
+
+    fn on_status_tick(&mut self) {
+        let now = self.clock();
+        let status = self.live.status();
+        let rate = (status.scans - self.scans_at_last_status) as f64
+            / (now - self.last_status_t).max(1e-3);
+        self.scans_at_last_status = status.scans;
+        self.last_status_t = now;
+        let sensor = match (&self.sensor_trouble, self.sensor_ok(now)) {
+            (_, true) => "streaming".to_string(),
+            (Some(why), false) => format!("SENSOR FAILING ({why})"),
+            (None, false) if self.last_scan_at.is_none() => "waiting for the sensor".to_string(),
+            (None, false) => "SENSOR SILENT".to_string(),
+        };
+        let line = status_line(&status, rate, &sensor);
+        info!(skipped = self.skipped, "{line}");
+        info!("latency µs p50/p99/max: {}", self.live.latencies().line());
+        self.notifier.status(&line);
+    }
+
+    /// The run's directory, made on first use (a run that never saw a scan
+    /// leaves no empty directory behind).
+    fn out_dir(&mut self) -> std::io::Result<PathBuf> {
+        if let Some(dir) = &self.out_dir {
+            return Ok(dir.clone());
+        }
+        let dir = new_dir(&self.state_dir, "run")?;
+        info!(dir = %dir.display(), "maps of this run are saved here");
+        self.out_dir = Some(dir.clone());
+        Ok(dir)
+    }
+
+    /// Starts writing a checkpoint on a blocking thread.
+    fn start_checkpoint(&mut self) -> Option<JoinHandle<Result<(), CheckpointFailed>>> {
+        if self.live.status().scans == 0 {
+            return None;
+        }
+        let dir = match self.out_dir() {
+            Ok(dir) => dir,
+            Err(e) => {
+                error!("cannot make the run directory, the map stays in memory: {e}");
+                return None;
+            }
+        };
+        let checkpoint = self.live.begin_checkpoint(&dir);
+        Some(tokio::task::spawn_blocking(move || checkpoint.write()))
+    }
+
+    fn checkpoint_done(
+        &mut self,
+        result: Result<Result<(), CheckpointFailed>, tokio::task::JoinError>,
+    ) {
+        match result {
+            Ok(Ok(())) => {}
+            Ok(Err(failed)) => {
+                let e = self.live.checkpoint_failed(failed);
+                error!(
+                    "checkpoint failed, the map stays in memory: {}",
+                    error_chain(&e)
+                );
+            }
+            Err(e) => error!("the checkpoint writer failed: {e}"),
+        }
+    }
+
+    fn reload(&mut self, path: &Option<PathBuf>) {
+        let Some(path) = path else {
+            info!("reload asked for, but no configuration file to re-read");
+            return;
+        };
+        let new = match DaemonConfig::load(path) {
+            Ok(new) => new,
+            Err(e) => {
+                error!(
+                    path = %path.display(),
+                    "reload refused, the running configuration stays: {}",
+                    error_chain(&e)
+                );
+                return;
+            }
+        };
+        let old = &self.config;
+        let mut restart: Vec<String> = self
+            .live
+            .retune(new.mapper)
+            .iter()
+            .map(|k| format!("mapper.{k}"))
+            .collect();
+        let mut base_fixed = new.base.clone();
+        base_fixed.max_speed = old.base.max_speed;
+        base_fixed.max_turn_rate = old.base.max_turn_rate;
+        base_fixed.max_acceleration = old.base.max_acceleration;
+        base_fixed.max_angular_acceleration = old.base.max_angular_acceleration;
+        base_fixed.stale_odometry = old.base.stale_odometry;
+        for (name, changed) in [
+            ("sensor", new.sensor != old.sensor),
+            ("base", base_fixed != old.base),
+            ("sim", new.sim != old.sim),
+            ("daemon", new.daemon != old.daemon),
+        ] {
+            if changed {
+                restart.push(name.to_string());
+            }
+        }
+        self.base.retune(new.base.limits(), new.base.stale_odometry);
+        let exploration = new
+            .exploration
+            .enabled
+            .then_some((new.exploration.planner, new.exploration.drive));
+        let now = self.clock();
+        self.live.set_exploration(exploration, now);
+        if !new.exploration.enabled {
+            self.base.halt(now);
+        }
+        let config = &mut self.config;
+        config.mapper = new.mapper;
+        config.base.stale_odometry = new.base.stale_odometry;
+        config.base.max_speed = new.base.max_speed;
+        config.base.max_turn_rate = new.base.max_turn_rate;
+        config.base.max_acceleration = new.base.max_acceleration;
+        config.base.max_angular_acceleration = new.base.max_angular_acceleration;
+        config.exploration = new.exploration;
+        if restart.is_empty() {
+            info!(path = %path.display(), "configuration reloaded");
+        } else {
+            warn!(
+                path = %path.display(),
+                "configuration reloaded; these changes need a restart and are not applied: {}",
+                restart.join(", ")
+            );
+        }
+    }
+
+    fn on_report(&mut self, report: &SensorReport) {
+        if let SensorReport::Failed { error, .. } = report {
+            self.sensor_trouble = Some(error.clone());
+        }
+        log_report(report);
+    }
+
+    /// Saves the map into the run's directory; if that fails, into a
+    /// rescue directory beside it, then under the system's temporary
+    /// directory. Returns where it went and, if rescued, why.
+    fn save(&mut self) -> Result<(Option<PathBuf>, Option<String>), DaemonError> {
+        if self.live.status().scans == 0 {
+            info!("no scan was mapped: nothing to save");
+            return Ok((None, None));
+        }
+        let first = match self.out_dir() {
+            Ok(dir) => match self.live.checkpoint(&dir) {
+                Ok(()) => return Ok((Some(dir), None)),
+                Err(e) => format!("{}: {}", dir.display(), error_chain(&e)),
+            },
+            Err(e) => format!("{}: {e}", self.state_dir.display()),
+        };
+        error!("cannot save the map in {first}");
+        let mut tried = vec![first.clone()];
+        for parent in [self.state_dir.clone(), std::env::temp_dir()] {
+            let rescue = match new_dir(&parent, "rescue") {
+                Ok(dir) => dir,
+                Err(e) => {
+                    tried.push(format!("{}: {e}", parent.display()));
+                    continue;
+                }
+            };
+            match self.live.checkpoint(&rescue) {
+                Ok(()) => {
+                    error!(dir = %rescue.display(), "map saved to a rescue directory instead");
+                    return Ok((Some(rescue), Some(first)));
+                }
+                Err(e) => tried.push(format!("{}: {}", rescue.display(), error_chain(&e))),
+            }
+        }
+        Err(DaemonError::Save {
+            tried: "every place".into(),
+            error: tried.join("; "),
+        })
+    }
 }
 
 /// Runs the daemon until the shutdown future completes, exploration ends
 /// (with `exit_when_complete`) or the time limit passes; then stops the
 /// base and the sensor and saves the map.
-pub async fn run(config: DaemonConfig, mut hooks: Hooks<'_>) -> Result<RunSummary, DaemonError> {
-    let mut config = config;
+pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, DaemonError> {
     let t0 = Instant::now();
-    let clock = move || t0.elapsed().as_secs_f64();
+    let state_dir = config.state_dir();
     let out_dir = match &hooks.out_dir {
         Some(dir) => {
-            std::fs::create_dir_all(dir).map_err(|source| DaemonError::OutputDir {
-                path: dir.clone(),
-                source,
-            })?;
-            dir.clone()
+            check_writable(dir)?;
+            Some(dir.clone())
         }
-        None => new_run_dir(&config.state_dir())?,
+        None => {
+            check_writable(&state_dir)?;
+            None
+        }
     };
-    info!(dir = %out_dir.display(), "maps will be saved here");
     let rig = build_rig(&config, t0)?;
-    let robot = rig.robot.clone();
     let link = config.link();
-    let mode = link.measuring_mode;
     let (scan_tx, mut scan_rx) = watch::channel::<Option<ScanSlot>>(None);
     let (report_tx, mut report_rx) = mpsc::unbounded_channel();
     let sensor = SensorThread::spawn(
         SensorOptions {
             port: rig.sensor_port.clone(),
-            link,
+            link: link.clone(),
             retry_initial: Duration::from_secs_f64(config.sensor.retry_initial),
             retry_max: Duration::from_secs_f64(config.sensor.retry_max),
             record: config.sensor.record.clone(),
@@ -382,214 +642,126 @@ pub async fn run(config: DaemonConfig, mut hooks: Hooks<'_>) -> Result<RunSummar
     )
     .map_err(DaemonError::Thread)?;
     info!(port = %rig.sensor_port.display(), "sensor thread started");
-
-    let exploration = |c: &DaemonConfig| {
-        c.exploration
-            .enabled
-            .then_some((c.exploration.planner, c.exploration.drive))
-    };
-    let mut live = LiveMapper::new(config.mapper, exploration(&config), clock());
-    let mut base = BaseDriver::new(rig.base, config.base.limits(), config.base.stale_odometry);
-    let mut notifier = Notifier::from_env();
+    let exploration = config
+        .exploration
+        .enabled
+        .then_some((config.exploration.planner, config.exploration.drive));
+    let notifier = Notifier::from_env();
     if let Some(w) = notifier.watchdog() {
         info!(interval_s = w.as_secs_f64(), "systemd watchdog enabled");
     }
-    let mut base_tick = tick_every(1.0 / config.base.rate);
-    let mut status_tick = tick_every(config.daemon.status_interval);
-    let checkpoints = config.daemon.checkpoint_interval > 0.0;
-    let mut checkpoint_tick = tick_every(if checkpoints {
-        config.daemon.checkpoint_interval
-    } else {
-        3600.0
-    });
+    let mut d = Daemon {
+        live: LiveMapper::new(config.mapper, exploration, 0.0),
+        base: BaseDriver::new(
+            rig.base,
+            config.base.limits(),
+            config.base.stale_odometry,
+            config.sensor.retry_initial,
+            config.sensor.retry_max,
+        ),
+        notifier,
+        robot: rig.robot.clone(),
+        mode: link.measuring_mode,
+        out_dir,
+        state_dir,
+        t0,
+        last_seq: 0,
+        skipped: 0,
+        last_scan_at: None,
+        first_scan_after: None,
+        silence_logged: false,
+        sensor_trouble: None,
+        scans_at_last_status: 0,
+        last_status_t: 0.0,
+        config,
+    };
+    let mut base_tick = tick_every(1.0 / d.config.base.rate);
+    let mut status_tick = tick_every(d.config.daemon.status_interval);
+    let checkpoints = d.config.daemon.checkpoint_interval > 0.0;
+    let mut checkpoint_tick = tick_every(d.config.daemon.checkpoint_interval.max(1.0));
     checkpoint_tick.reset();
-    let mut last_seq = 0u64;
-    let mut skipped = 0u64;
-    let mut last_scan_at: Option<f64> = None;
-    let mut first_scan_after = None;
-    let mut sensor_silent_logged = false;
-    let mut scans_at_last_status = 0u64;
-    let mut last_status_t = 0.0;
-    let mut reload = hooks.reload.take();
-    let mut shutdown = hooks.shutdown;
+    let mut writing: Option<JoinHandle<Result<(), CheckpointFailed>>> = None;
+    let Hooks {
+        shutdown: mut shutdown_signal,
+        mut reload,
+        config_path,
+        mut on_scan,
+        ..
+    } = hooks;
     let reason = loop {
         tokio::select! {
-            () = &mut shutdown => break StopReason::Shutdown,
+            () = &mut shutdown_signal => break StopReason::Shutdown,
             Some(()) = async {
                 match reload.as_mut() {
                     Some(r) => r.recv().await,
                     None => std::future::pending().await,
                 }
-            } => {
-                reload_config(&hooks.config_path, &mut config, &mut live, &mut base);
-            }
+            } => d.reload(&config_path),
             changed = scan_rx.changed() => {
                 if changed.is_err() {
-                    // The sensor thread ended; it only does on stop.
-                    std::future::pending::<()>().await;
+                    error!("the sensor thread ended; saving the map and stopping");
+                    break StopReason::SensorThreadEnded;
                 }
-                let Some(slot) = scan_rx.borrow_and_update().clone() else { continue };
-                skipped += slot.seq.saturating_sub(last_seq + 1);
-                last_seq = slot.seq;
-                let now = clock();
-                base.poll(now, &mut live);
-                let t = slot.scan.timestamp.saturating_duration_since(t0).as_secs_f64();
-                let Some(scan) = range_scan(&slot.scan.scan, t, mode) else { continue };
-                let queued = slot.scan.received_at.elapsed();
-                let outcome = live.on_scan(scan, Some(queued));
-                if first_scan_after.is_none() {
-                    first_scan_after = Some(now);
-                    info!(after_s = now, "first scan mapped; ready");
-                    notifier.ready();
-                }
-                if sensor_silent_logged {
-                    info!("scans are back");
-                    sensor_silent_logged = false;
-                }
-                last_scan_at = Some(now);
-                if let Some(hook) = hooks.on_scan.as_mut() {
-                    hook(&ScanProgress {
-                        t: now,
-                        pose: outcome.pose,
-                        truth: robot.as_ref().map(|r| r.true_pose_at(t)),
-                        localized: outcome.localized,
-                        status: live.status(),
-                    });
+                let slot = scan_rx.borrow_and_update().clone();
+                if let Some(slot) = slot {
+                    d.on_scan(&slot, &mut on_scan);
                 }
             }
-            Some(report) = report_rx.recv() => log_report(&report),
+            Some(report) = report_rx.recv() => d.on_report(&report),
             _ = base_tick.tick() => {
-                let _span = info_span!("control").entered();
-                let now = clock();
-                notifier.loop_alive(Instant::now());
-                base.poll(now, &mut live);
-                let sensor_ok = last_scan_at.is_some_and(|t| now - t <= config.sensor.silence_stop);
-                if !sensor_ok && last_scan_at.is_some() && !sensor_silent_logged {
-                    warn!(silent_s = config.sensor.silence_stop, "no scan: the base stops until scans return");
-                    sensor_silent_logged = true;
-                }
-                if live.explorer().is_some() {
-                    let (twist, _) = if sensor_ok { live.control(now) } else { (Twist::ZERO, None) };
-                    base.command(twist, !sensor_ok, now, live.last_odometry_time());
-                } else if !sensor_ok {
-                    base.command(Twist::ZERO, true, now, live.last_odometry_time());
-                }
-                if config.exploration.exit_when_complete && live.exploration_complete() {
-                    break StopReason::ExplorationComplete;
-                }
-                if config.daemon.max_run_time > 0.0 && now >= config.daemon.max_run_time {
-                    break StopReason::TimeLimit;
+                if let Some(reason) = d.on_base_tick() {
+                    break reason;
                 }
             }
-            _ = status_tick.tick() => {
-                let now = clock();
-                let status = live.status();
-                let rate = (status.scans - scans_at_last_status) as f64 / (now - last_status_t).max(1e-3);
-                scans_at_last_status = status.scans;
-                last_status_t = now;
-                let sensor_ok = last_scan_at.is_some_and(|t| now - t <= config.sensor.silence_stop);
-                let line = status_line(&status, rate, sensor_ok);
-                info!(skipped, "{line}");
-                info!("latency µs p50/p99/max: {}", live.latencies().line());
-                notifier.status(&line);
+            _ = status_tick.tick() => d.on_status_tick(),
+            _ = checkpoint_tick.tick(), if checkpoints && writing.is_none() => {
+                writing = d.start_checkpoint();
             }
-            _ = checkpoint_tick.tick(), if checkpoints => {
-                if let Err(e) = live.checkpoint(&out_dir) {
-                    error!(dir = %out_dir.display(), "checkpoint failed, the map stays in memory: {}", error_chain(&e));
+            result = async {
+                match writing.as_mut() {
+                    Some(task) => task.await,
+                    None => std::future::pending().await,
                 }
+            } => {
+                writing = None;
+                d.checkpoint_done(result);
             }
         }
     };
     info!(?reason, "stopping");
-    notifier.stopping();
-    let now = clock();
-    base.stop(now);
-    // Closing the link (stop streaming, back to 9600 Bd) blocks briefly.
-    let stopped = tokio::task::spawn_blocking(move || sensor.stop()).await;
-    if stopped.is_err() {
+    d.notifier.stopping();
+    let now = d.clock();
+    d.base.stop(now);
+    // Stop streaming while the map is saved; closing the link (stop the
+    // output, back to 9600 Bd) takes a moment and the save does not wait.
+    sensor.request_stop();
+    if let Some(task) = writing.take() {
+        let result = task.await;
+        d.checkpoint_done(result);
+    }
+    let saved = d.save();
+    let joined = tokio::task::spawn_blocking(move || sensor.stop()).await;
+    if joined.is_err() {
         warn!("the sensor thread did not stop cleanly");
     }
     while let Ok(report) = report_rx.try_recv() {
-        log_report(&report);
+        d.on_report(&report);
     }
-    let saved_in = save(&mut live, &out_dir)?;
-    let status = live.status();
-    info!(dir = %saved_in.display(), "{}", status_line(&status, 0.0, true));
+    let (out_dir, rescued_because) = saved?;
+    let status = d.live.status();
+    info!("{}", status_line(&status, 0.0, "stopped:"));
     Ok(RunSummary {
         reason,
-        out_dir: saved_in,
+        out_dir,
+        rescued_because,
         scans: status.scans,
         status,
-        scans_skipped: skipped,
-        odometry_refused: base.odometry_refused(),
-        latencies: live.latencies().summaries(),
-        first_scan_after,
-        run_time: clock(),
+        scans_skipped: d.skipped,
+        odometry_refused: d.base.odometry_refused(),
+        latencies: d.live.latencies().summaries(),
+        first_scan_after: d.first_scan_after,
+        run_time: d.clock(),
     })
-}
-
-fn reload_config(
-    path: &Option<PathBuf>,
-    config: &mut DaemonConfig,
-    live: &mut LiveMapper,
-    base: &mut BaseDriver,
-) {
-    let Some(path) = path else {
-        info!("reload asked for, but no configuration file to re-read");
-        return;
-    };
-    match DaemonConfig::load(path) {
-        Err(e) => error!(
-            path = %path.display(),
-            "reload refused, the running configuration stays: {}",
-            error_chain(&e)
-        ),
-        Ok(new) => {
-            let exploration = new
-                .exploration
-                .enabled
-                .then_some((new.exploration.planner, new.exploration.drive));
-            let kept = live.retune(new.mapper, exploration);
-            base.retune(new.base.limits(), new.base.stale_odometry);
-            let mut restart = kept
-                .iter()
-                .map(|k| format!("mapper.{k}"))
-                .collect::<Vec<_>>();
-            for (name, changed) in [
-                ("sensor", new.sensor != config.sensor),
-                ("base.adapter", new.base.adapter != config.base.adapter),
-                ("sim", new.sim != config.sim),
-                ("daemon", new.daemon != config.daemon),
-                (
-                    "exploration.enabled",
-                    new.exploration.enabled != config.exploration.enabled,
-                ),
-            ] {
-                if changed {
-                    restart.push(name.to_string());
-                }
-            }
-            // Tunables take effect; the rest stays as it runs.
-            config.mapper = new.mapper;
-            config.base.stale_odometry = new.base.stale_odometry;
-            config.base.max_speed = new.base.max_speed;
-            config.base.max_turn_rate = new.base.max_turn_rate;
-            config.base.max_acceleration = new.base.max_acceleration;
-            config.base.max_angular_acceleration = new.base.max_angular_acceleration;
-            config.exploration.planner = new.exploration.planner;
-            config.exploration.drive = new.exploration.drive;
-            config.exploration.exit_when_complete = new.exploration.exit_when_complete;
-            if restart.is_empty() {
-                info!(path = %path.display(), "configuration reloaded");
-            } else {
-                warn!(
-                    path = %path.display(),
-                    "configuration reloaded; these changes need a restart and are not applied: {}",
-                    restart.join(", ")
-                );
-            }
-        }
-    }
 }
 
 fn log_report(report: &SensorReport) {
@@ -622,14 +794,4 @@ fn log_report(report: &SensorReport) {
             Event::Scan(_) => {}
         },
     }
-}
-
-/// Link counters are per connection and live in the sensor thread; the
-/// loop counts what reaches it. Kept for the status of a finished run.
-#[allow(dead_code)]
-fn link_stats_line(stats: &LinkStats) -> String {
-    format!(
-        "{} scans, {} frames dropped, {} telegrams lost",
-        stats.scans, stats.dropped_frames, stats.lost_telegrams
-    )
 }

@@ -21,7 +21,7 @@ use std::time::{Duration, Instant};
 use lms200::driver::SerialDriver;
 use lms200::link::{Event, LinkConfig, TimedScan};
 use tokio::sync::{mpsc, watch};
-use tracing::{info, warn};
+use tracing::{error, info, warn};
 
 /// A scan in the mailbox, numbered so the reader of the mailbox can count
 /// the scans it never saw.
@@ -78,6 +78,12 @@ impl SensorThread {
         })
     }
 
+    /// Asks the thread to stop streaming and close the link, without
+    /// waiting for it.
+    pub fn request_stop(&self) {
+        self.stop.store(true, Ordering::SeqCst);
+    }
+
     /// Stops streaming, closes the link and waits for the thread.
     pub fn stop(mut self) {
         self.stop.store(true, Ordering::SeqCst);
@@ -103,11 +109,17 @@ fn run(
 ) {
     let mut wait = options.retry_initial;
     let mut seq = 0u64;
+    // A recording is a convenience: when it cannot be written (disk full,
+    // a read-only path) it is given up, never the scans.
+    let mut record = options.record.clone();
     while !stop.load(Ordering::SeqCst) {
         let mut streamed = false;
         let result = SerialDriver::open(&options.port, options.link.clone())
-            .map_err(|e| error_chain(&e))
-            .and_then(|driver| attach_recording(driver, &options))
+            .map_err(DriverError::from_open)
+            .and_then(|driver| match record.as_deref() {
+                Some(path) => attach_recording(driver, path, &options),
+                None => Ok(driver),
+            })
             .and_then(|mut driver| {
                 info!(port = %options.port.display(), "serial port open");
                 driver
@@ -130,7 +142,7 @@ fn run(
                             ControlFlow::Continue(())
                         },
                     )
-                    .map_err(|e| error_chain(&e))
+                    .map_err(DriverError::from_run)
             });
         if streamed {
             wait = options.retry_initial;
@@ -141,7 +153,11 @@ fn run(
                     break;
                 }
             }
-            Err(error) => {
+            Err(DriverError::Recording(error)) => {
+                error!("recording stopped, streaming goes on without it: {error}");
+                record = None;
+            }
+            Err(DriverError::Port(error)) => {
                 let _ = reports.send(SensorReport::Failed {
                     error,
                     retry_in: wait,
@@ -156,14 +172,39 @@ fn run(
     }
 }
 
-fn attach_recording(driver: SerialDriver, options: &SensorOptions) -> Result<SerialDriver, String> {
-    let Some(path) = &options.record else {
-        return Ok(driver);
-    };
+/// A failure of the sensor thread's driver, sorted by what to do next.
+enum DriverError {
+    /// The port or the sensor: wait and try again.
+    Port(String),
+    /// The recording: drop it and stream on.
+    Recording(String),
+}
+
+impl DriverError {
+    fn from_open(e: lms200::driver::DriverError) -> DriverError {
+        DriverError::Port(error_chain(&e))
+    }
+
+    fn from_run(e: lms200::driver::DriverError) -> DriverError {
+        match e {
+            lms200::driver::DriverError::Recording(_) => DriverError::Recording(error_chain(&e)),
+            other => DriverError::Port(error_chain(&other)),
+        }
+    }
+}
+
+/// Adds a recording in a new file next to `path` (`-1`, `-2` … appended
+/// when the name exists); the port is opened again if the recording cannot
+/// be started.
+fn attach_recording(
+    driver: SerialDriver,
+    path: &std::path::Path,
+    options: &SensorOptions,
+) -> Result<SerialDriver, DriverError> {
     let file = (0..1000)
         .map(|k| {
             if k == 0 {
-                path.clone()
+                path.to_owned()
             } else {
                 let mut name = path.as_os_str().to_owned();
                 name.push(format!("-{k}"));
@@ -179,10 +220,10 @@ fn attach_recording(driver: SerialDriver, options: &SensorOptions) -> Result<Ser
                 .map(|f| (p, f))
         });
     let Some((p, file)) = file else {
-        return Err(format!(
+        return Err(DriverError::Recording(format!(
             "cannot create a new recording next to {}",
             path.display()
-        ));
+        )));
     };
     info!(path = %p.display(), "recording the telegram stream");
     driver
@@ -193,7 +234,7 @@ fn attach_recording(driver: SerialDriver, options: &SensorOptions) -> Result<Ser
                 options.link.measuring_mode.code()
             ),
         )
-        .map_err(|e| error_chain(&e))
+        .map_err(DriverError::from_run)
 }
 
 /// An error and its causes on one line.

@@ -153,9 +153,11 @@ impl VirtualRobot {
             line: VirtualLine::new(link, emulator, t0),
             live: LiveMapper::new(config.mapper, exploration, 0.0),
             base: BaseDriver::new(
-                Some(Box::new(robot.base())),
+                Some(BaseDriver::once(Box::new(robot.base()))),
                 config.base.limits(),
                 config.base.stale_odometry,
+                config.sensor.retry_initial,
+                config.sensor.retry_max,
             ),
             robot,
             world,
@@ -243,14 +245,9 @@ impl VirtualRobot {
         let sensor_ok = self
             .last_scan_at
             .is_some_and(|t| self.now - t <= self.silence_stop);
-        let twist = match drive(&self.live, self.now) {
-            Some(twist) => twist,
-            None if sensor_ok => self.live.control(self.now).0,
-            None => Twist::ZERO,
-        };
-        let last_odometry = self.live.last_odometry_time();
+        let manual = drive(&self.live, self.now);
         self.base
-            .command(twist, !sensor_ok, self.now, last_odometry);
+            .control(&mut self.live, sensor_ok, self.now, manual);
     }
 
     fn score(&mut self, t: f64, estimate: Pose2) {

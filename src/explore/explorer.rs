@@ -69,7 +69,14 @@ pub struct Explorer {
     memory: ExplorationMemory,
     state: State,
     stats: ExplorerStats,
+    /// When `control` was last called (s): a longer gap is a pause (the
+    /// base held for a silent sensor or stale odometry), and the goal's
+    /// deadline moves on by it.
+    last_control: Option<f64>,
 }
+
+/// A gap between control calls longer than this (s) is a pause.
+const PAUSE: f64 = 0.5;
 
 impl Explorer {
     /// Starts by settling for `drive.settle_time` from `now` (s), so the
@@ -83,6 +90,7 @@ impl Explorer {
                 until: now + drive.settle_time,
             },
             stats: ExplorerStats::default(),
+            last_control: None,
         }
     }
 
@@ -125,6 +133,13 @@ impl Explorer {
         pose: Pose2,
         now: f64,
     ) -> (Twist, Option<ExplorerEvent>) {
+        let gap = self.last_control.map_or(0.0, |t| now - t);
+        self.last_control = Some(now);
+        if gap > PAUSE
+            && let State::Driving { deadline, .. } = &mut self.state
+        {
+            *deadline += gap;
+        }
         match &mut self.state {
             State::Complete { .. } => (Twist::ZERO, None),
             State::Settling { until } => {
@@ -278,11 +293,23 @@ mod tests {
         let pose = Pose2::new(3.0, 1.5, 0.0);
         ex.control(&open, pose, 1.0);
         assert!(ex.goal().is_some());
+        // A pause (the base held) moves the deadline on.
+        let (_, event) = ex.control(&open, pose, 40.0);
+        assert_eq!(event, None, "paused for 39 s, not timed out");
         // The robot never moves.
-        let (_, event) = ex.control(&open, pose, 1000.0);
-        assert!(matches!(event, Some(ExplorerEvent::TimedOut { .. })));
+        let (_, event) = ex.control(&open, pose, 40.3);
+        assert_eq!(event, None);
+        let mut t = 40.3;
+        let event = loop {
+            t += 0.1;
+            if let (_, Some(e)) = ex.control(&open, pose, t) {
+                break e;
+            }
+            assert!(t < 100.0);
+        };
+        assert!(matches!(event, ExplorerEvent::TimedOut { .. }), "{event:?}");
         let nan = Pose2::new(f64::NAN, 0.0, 0.0);
-        let (tw, event) = ex.control(&open, nan, 1001.0);
+        let (tw, event) = ex.control(&open, nan, t + 0.6);
         assert_eq!(tw, Twist::ZERO);
         assert!(matches!(event, Some(ExplorerEvent::PlanFailed { .. })));
         assert_eq!(ex.stats().plan_failures, 1);

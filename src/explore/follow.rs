@@ -18,7 +18,7 @@ use crate::geometry::{Pose2, wrap_angle};
 #[serde(deny_unknown_fields, default)]
 pub struct DriveConfig {
     /// Cruise speed (default 0.5 m/s, half the XR4000's assumed limit:
-    /// at 75 scans/s the robot moves under 7 mm between scans).
+    /// at 37.5 scans/s the robot moves under 14 mm between scans).
     pub speed: f64,
     /// Largest turn rate commanded (default 1.0 rad/s).
     pub turn_rate: f64,
@@ -143,6 +143,10 @@ impl PathFollower {
 
     /// The command for a robot at `pose` (map frame).
     pub fn step(&mut self, pose: &Pose2, cfg: &DriveConfig) -> FollowStep {
+        if ![pose.x, pose.y, pose.theta].iter().all(|v| v.is_finite()) {
+            // No way to steer from nowhere; and no waypoint is passed.
+            return FollowStep::Drive(Twist::ZERO);
+        }
         let last = self.path.len() - 1;
         while self.next < last {
             let w = self.path[self.next];
@@ -252,5 +256,10 @@ mod tests {
         assert!((tw.omega + cfg.turn_rate).abs() < 1e-9);
         assert!(cfg.is_valid());
         assert!(!DriveConfig { speed: 0.0, ..cfg }.is_valid());
+        // A pose that is not finite stops the base and skips no waypoint.
+        let before = f.clone();
+        let nan = Pose2::new(f64::NAN, 0.0, 0.0);
+        assert_eq!(f.step(&nan, &cfg), FollowStep::Drive(Twist::ZERO));
+        assert_eq!(f, before);
     }
 }
