@@ -6,7 +6,7 @@ mod cli;
 
 fn main() -> ExitCode {
     let args = cli::Cli::parse_args();
-    cli::init_logging(args.verbose, args.quiet);
+    cli::init_logging(args.verbose, args.quiet, args.shows_progress());
     match cli::run(args) {
         Ok(code) => code,
         // A closed pipe (`clsmap decode rec | head`) is a normal way to stop.

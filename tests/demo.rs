@@ -10,13 +10,11 @@ use clsmap::demo::{demo_config, run_demo};
 use clsmap::map::cls::{ClsMap, ClsMapConfig};
 
 #[test]
-fn a_room_is_explored_to_completion_through_the_pty() {
-    let mut config = demo_config().unwrap();
-    // The smallest built-in world keeps the real-time run short.
-    config.sim.world = "room".into();
-    config.daemon.max_run_time = 240.0;
+fn the_demo_world_is_explored_to_completion_through_the_pty() {
+    // Exactly what `clsmap demo` runs (about a minute of real time).
+    let config = demo_config().unwrap();
     let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join(format!("demo-room-{}", std::process::id()));
+        .join(format!("demo-{}", std::process::id()));
     let mut reports = 0u64;
     let summary = run_demo(config, &out, |_| reports += 1).unwrap();
     println!("{}", serde_json::to_string_pretty(&summary).unwrap());
@@ -30,6 +28,12 @@ fn a_room_is_explored_to_completion_through_the_pty() {
     assert!(summary.scans > 100, "{summary:?}");
     assert!(summary.walls_on_world > 0.9, "{summary:?}");
     assert!(summary.mean_error_m < 0.05, "{summary:?}");
+    let latency = summary
+        .latencies
+        .iter()
+        .find(|l| l.stage == clsmap::daemon::Stage::Pose)
+        .unwrap();
+    assert_eq!(latency.count, summary.scans);
     assert!(summary.max_heading_error_deg < 1.0, "{summary:?}");
     // The saved map loads, is valid and closed: no frontier worth a goal.
     let map = ClsMap::load(&out.join("map.json"), ClsMapConfig::default()).unwrap();

@@ -200,17 +200,25 @@ impl Cli {
     pub fn parse_args() -> Self {
         Cli::parse()
     }
+
+    /// Whether the command draws live progress of its own (the demo): its
+    /// log then shows warnings only, unless -v asks for more.
+    pub fn shows_progress(&self) -> bool {
+        matches!(self.command, Command::Demo { .. })
+    }
 }
 
 /// Logs to stderr; RUST_LOG or else CLSMAP_LOG (the systemd unit's), if
-/// set, wins over -v/-q.
-pub fn init_logging(verbose: u8, quiet: bool) {
-    let default = match (quiet, verbose) {
-        (true, _) => "warn",
-        (false, 0) => "info",
-        (false, 1) => "debug",
-        _ => "trace",
+/// set, wins over -v/-q. A command with live progress of its own starts a
+/// level lower (warnings), so the log does not drown the progress line.
+pub fn init_logging(verbose: u8, quiet: bool, shows_progress: bool) {
+    const LEVELS: [&str; 4] = ["warn", "info", "debug", "trace"];
+    let level = if quiet {
+        0
+    } else {
+        (1 + usize::from(verbose)).saturating_sub(usize::from(shows_progress))
     };
+    let default = LEVELS[level.min(LEVELS.len() - 1)];
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .or_else(|_| tracing_subscriber::EnvFilter::try_from_env("CLSMAP_LOG"))
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));

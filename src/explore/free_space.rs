@@ -380,7 +380,11 @@ mod tests {
         // than the clearance, the price of arcs drawn outside the circle.
         let r = 0.5 / (0.5 * ROUND_STEP).cos();
         let area = (4.0 - 2.0 * r) * (2.0 - 2.0 * r);
-        assert!((f.area() - area).abs() < 1e-3, "area {} vs {area}", f.area());
+        assert!(
+            (f.area() - area).abs() < 1e-3,
+            "area {} vs {area}",
+            f.area()
+        );
         assert!(f.contains([0.51, 0.51]) && f.contains([2.0, 1.0]));
         assert!(!f.contains([0.5, 1.0]));
     }

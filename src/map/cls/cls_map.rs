@@ -285,6 +285,8 @@ impl ClsMap {
                 self.windowed_union(local, lines, pose, pose_cov, &whole, &crossing, window_box)?
         {
             let committed = self.with_far_holes(shapes, &far_holes)?;
+            // Checked whole: the splice can disturb a loop away from the
+            // window too (seen in the daemon's simulated runs).
             if self.check_candidate(&touched, &committed).is_ok() {
                 result = Some((committed, stats));
             }
@@ -339,19 +341,27 @@ impl ClsMap {
         Ok(new_shapes)
     }
 
-    /// Checks the map the update would leave: the untouched shapes and
-    /// `new_shapes` together (about O(n log n), a few tens of µs for a
-    /// thousand segments; once per keyframe).
+    /// Checks the map the update would leave: `new_shapes` and the
+    /// untouched shapes next to them (O(n log n) in their segments; once
+    /// per keyframe).
     fn check_candidate(
         &self,
         touched: &[usize],
         new_shapes: &[ClsShape],
     ) -> Result<(), InvariantError> {
+        // Untouched shapes apart from the new ones cannot cross them, and
+        // they were valid before: only those whose boxes meet take part.
+        let boxes: Vec<_> = new_shapes.iter().map(|s| s.outer.bounds()).collect();
         let untouched = self
             .shapes
             .iter()
             .enumerate()
-            .filter(|(i, _)| !touched.contains(i))
+            .filter(|(i, _)| {
+                !touched.contains(i)
+                    && boxes
+                        .iter()
+                        .any(|b| boxes_overlap(&self.bounds[*i], b, 0.0))
+            })
             .map(|(_, s)| s);
         check_loops(untouched.chain(new_shapes))
     }
