@@ -1,6 +1,7 @@
 //! [`ClsMap`]: the global CLS map and its update (local CLS map → map
 //! frame → fusion of actual segments → region union).
 
+use std::collections::HashMap;
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
@@ -11,7 +12,8 @@ use crate::map::{SegmentMapConfig, blur_by_pose};
 use super::fusion::LineTable;
 use super::local::{LocalMapConfig, LocalMapError, LocalRegion, LocalSource, local_region};
 use super::loops::{
-    ClsLoop, ClsSegment, ClsShape, ClsmItem, InvariantError, SegmentMode, check_loops, items,
+    ClsLoop, ClsSegment, ClsShape, ClsmItem, InvariantError, SegmentMode, check_loops,
+    check_loops_changed, items,
 };
 use super::region::{
     EdgeOrigin, RegionConfig, RegionEdge, RegionError, RegionShape, clean_checked, union,
@@ -352,18 +354,41 @@ impl ClsMap {
         // Untouched shapes apart from the new ones cannot cross them, and
         // they were valid before: only those whose boxes meet take part.
         let boxes: Vec<_> = new_shapes.iter().map(|s| s.outer.bounds()).collect();
-        let untouched = self
-            .shapes
-            .iter()
-            .enumerate()
-            .filter(|(i, _)| {
+        let untouched: Vec<usize> = (0..self.shapes.len())
+            .filter(|i| {
                 !touched.contains(i)
                     && boxes
                         .iter()
                         .any(|b| boxes_overlap(&self.bounds[*i], b, 0.0))
             })
-            .map(|(_, s)| s);
-        check_loops(untouched.chain(new_shapes))
+            .collect();
+        // Segments of the map as it was (touched shapes included) are
+        // unchanged wherever the update took them over bit for bit.
+        let key = |a: [f64; 2], b: [f64; 2]| {
+            [
+                a[0].to_bits(),
+                a[1].to_bits(),
+                b[0].to_bits(),
+                b[1].to_bits(),
+            ]
+        };
+        // Counted, so a segment the update duplicated is not taken for old.
+        let mut before: HashMap<[u64; 4], usize> = HashMap::new();
+        for &i in touched.iter().chain(&untouched) {
+            for l in self.shapes[i].loops() {
+                for seg in l.segments() {
+                    *before.entry(key(seg.start(), seg.end())).or_default() += 1;
+                }
+            }
+        }
+        let shapes = untouched.iter().map(|&i| &self.shapes[i]).chain(new_shapes);
+        check_loops_changed(shapes, |a, b| match before.get_mut(&key(a, b)) {
+            Some(n) if *n > 0 => {
+                *n -= 1;
+                true
+            }
+            _ => false,
+        })
     }
 
     /// The union with the crossing loops clipped to the window; `None` if

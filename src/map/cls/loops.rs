@@ -260,11 +260,26 @@ pub enum InvariantError {
 
 /// A segment as the crossing test sees it: `(loop, segment)`, its ends,
 /// and the length of its loop (to recognise neighbours).
-type SweepEntry = (usize, usize, [f64; 2], [f64; 2], usize);
+/// Loop index, segment index, start, end, loop length, and whether the
+/// segment is known to be unchanged from a valid map.
+type SweepEntry = (usize, usize, [f64; 2], [f64; 2], usize, bool);
 
 /// Checks every invariant of the module documentation.
 pub fn check_loops<'a>(
     shapes: impl IntoIterator<Item = &'a ClsShape>,
+) -> Result<(), InvariantError> {
+    check_loops_changed(shapes, |_, _| false)
+}
+
+/// [`check_loops`] for a map made by changing a valid one: `unchanged`
+/// tells the segments (start, end) taken over as they were (asked once
+/// per segment, in loop order). Closure and
+/// orientation are checked everywhere (linear time); crossings only where
+/// a changed segment takes part, since two unchanged ones did not cross
+/// before and still do not.
+pub fn check_loops_changed<'a>(
+    shapes: impl IntoIterator<Item = &'a ClsShape>,
+    mut unchanged: impl FnMut([f64; 2], [f64; 2]) -> bool,
 ) -> Result<(), InvariantError> {
     let mut all: Vec<SweepEntry> = Vec::new();
     let mut loop_index = 0;
@@ -285,11 +300,28 @@ pub fn check_loops<'a>(
                 });
             }
             for (i, s) in lp.segments().iter().enumerate() {
-                all.push((loop_index, i, s.start(), s.end(), lp.len()));
+                let old = unchanged(s.start(), s.end());
+                all.push((loop_index, i, s.start(), s.end(), lp.len(), old));
             }
             loop_index += 1;
         }
     }
+    // Only segments that meet the box of the changed ones can cross them.
+    let mut changed = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for &(_, _, a, b, _, old) in &all {
+        if !old {
+            for p in [a, b] {
+                changed.0 = [changed.0[0].min(p[0]), changed.0[1].min(p[1])];
+                changed.1 = [changed.1[0].max(p[0]), changed.1[1].max(p[1])];
+            }
+        }
+    }
+    all.retain(|&(_, _, a, b, _, old)| {
+        !old || (a[0].min(b[0]) <= changed.1[0]
+            && a[0].max(b[0]) >= changed.0[0]
+            && a[1].min(b[1]) <= changed.1[1]
+            && a[1].max(b[1]) >= changed.0[1])
+    });
     check_no_crossings(&mut all)
 }
 
@@ -330,11 +362,14 @@ fn check_chain(lp: &ClsLoop, loop_index: usize) -> Result<(), InvariantError> {
 fn check_no_crossings(all: &mut [SweepEntry]) -> Result<(), InvariantError> {
     all.sort_by(|p, q| p.2[0].min(p.3[0]).total_cmp(&q.2[0].min(q.3[0])));
     for i in 0..all.len() {
-        let (li, si, a, b, ni) = all[i];
+        let (li, si, a, b, ni, old_i) = all[i];
         let max_x = a[0].max(b[0]);
-        for &(lj, sj, c, d, _) in &all[i + 1..] {
+        for &(lj, sj, c, d, _, old_j) in &all[i + 1..] {
             if c[0].min(d[0]) > max_x {
                 break;
+            }
+            if old_i && old_j {
+                continue;
             }
             let adjacent = li == lj && ((si + 1) % ni == sj || (sj + 1) % ni == si);
             let shared = [a, b].into_iter().find(|p| *p == c || *p == d);
