@@ -69,7 +69,7 @@ def serve(conn):
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--host", default="127.0.0.1")
-    p.add_argument("--port", type=int, default=5600, help="0 picks a free port")
+    p.add_argument("--port", type=int, default=7300, help="0 picks a free port")
     p.add_argument("--once", action="store_true", help="exit after one client")
     args = p.parse_args()
     with socket.create_server((args.host, args.port)) as srv:

@@ -787,6 +787,9 @@ fn log_report(report: &SensorReport) {
             ),
             Event::SensorRestarted => warn!("sensor restarted (power-up telegram)"),
             Event::SensorSilent => warn!("sensor silent: no scan within the watchdog time"),
+            Event::Reinitializing {
+                reason: lms200::link::ReinitReason::Start,
+            } => info!("sensor link starting: finding the line speed"),
             Event::Reinitializing { reason } => warn!(?reason, "sensor link starting over"),
             Event::CommandRejected { command } => warn!(?command, "sensor rejected a command"),
             Event::Error(e) => warn!("sensor link: {e}"),
