@@ -15,3 +15,16 @@ pub mod pipeline;
 pub mod render;
 pub mod sim;
 pub mod trajectory;
+
+/// An error and its causes on one line, outermost first: what failed and
+/// why, for a log line or a status report.
+pub fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut source = e.source();
+    while let Some(s) = source {
+        text.push_str(": ");
+        text.push_str(&s.to_string());
+        source = s.source();
+    }
+    text
+}

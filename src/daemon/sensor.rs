@@ -23,6 +23,8 @@ use lms200::link::{Event, LinkConfig, TimedScan};
 use tokio::sync::{mpsc, watch};
 use tracing::{error, info, warn};
 
+use crate::error_chain;
+
 /// A scan in the mailbox, numbered so the reader of the mailbox can count
 /// the scans it never saw.
 #[derive(Debug, Clone)]
@@ -235,16 +237,4 @@ fn attach_recording(
             ),
         )
         .map_err(DriverError::from_run)
-}
-
-/// An error and its causes on one line.
-pub fn error_chain(e: &dyn std::error::Error) -> String {
-    let mut text = e.to_string();
-    let mut source = e.source();
-    while let Some(s) = source {
-        text.push_str(": ");
-        text.push_str(&s.to_string());
-        source = s.source();
-    }
-    text
 }

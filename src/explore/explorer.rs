@@ -14,7 +14,7 @@ use super::follow::{DriveConfig, FollowStep, PathFollower};
 use super::goal::Frontier;
 use super::memory::ExplorationMemory;
 use super::planner::path_length;
-use super::pursuit::{ExploreError, NextStep, next_step};
+use super::pursuit::{NextStep, next_step};
 use crate::geometry::Pose2;
 use crate::map::cls::ClsMap;
 
@@ -202,46 +202,21 @@ impl Explorer {
                 self.stats.plan_failures += 1;
                 self.settle(now);
                 ExplorerEvent::PlanFailed {
-                    reason: plan_failure(&e),
+                    reason: crate::error_chain(&e),
                 }
             }
         }
     }
 }
 
-fn plan_failure(e: &ExploreError) -> String {
-    let mut text = e.to_string();
-    let mut source = std::error::Error::source(e);
-    while let Some(s) = source {
-        text.push_str(": ");
-        text.push_str(&s.to_string());
-        source = s.source();
-    }
-    text
-}
-
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-    use crate::map::cls::{ClsLoop, ClsMapConfig, ClsSegment, ClsShape, SegmentMode};
 
     fn room(open: &[usize]) -> ClsMap {
         let pts = [[0.0, 0.0], [6.0, 0.0], [6.0, 3.0], [0.0, 3.0]];
-        let segments = (0..4)
-            .map(|i| {
-                let mut s = ClsSegment::virtual_between(pts[i], pts[(i + 1) % 4]);
-                if !open.contains(&i) {
-                    s.mode = SegmentMode::Actual;
-                }
-                s
-            })
-            .collect();
-        let shape = ClsShape {
-            outer: ClsLoop::new(segments),
-            holes: vec![],
-        };
-        ClsMap::from_shapes(ClsMapConfig::default(), vec![shape]).unwrap()
+        crate::explore::pursuit::tests::map_of(&pts, open)
     }
 
     #[test]

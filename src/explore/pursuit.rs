@@ -149,12 +149,12 @@ pub fn next_step(
 
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::map::cls::{ClsLoop, ClsMapConfig, ClsSegment, ClsShape, SegmentMode};
 
     /// A map of one CCW polygon; edges listed in `open` are virtual.
-    fn map_of(points: &[[f64; 2]], open: &[usize]) -> ClsMap {
+    pub(crate) fn map_of(points: &[[f64; 2]], open: &[usize]) -> ClsMap {
         let n = points.len();
         let segments = (0..n)
             .map(|i| {
