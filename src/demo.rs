@@ -160,17 +160,37 @@ fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
 }
 
+/// When the demo stops before exploration completes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DemoStop {
+    /// Only at its time limit.
+    TimeLimit,
+    /// Also on Ctrl-C (SIGINT), saving the map as the daemon does.
+    CtrlC,
+}
+
 /// Runs `config` (the demo's, or a variation of it) with its maps written
-/// to `out_dir`, until exploration completes or its time limit passes.
+/// to `out_dir`, until exploration completes, its time limit passes or, as
+/// `stop` says, Ctrl-C is pressed.
 pub fn run_demo(
     config: DaemonConfig,
     out_dir: &Path,
+    stop: DemoStop,
     mut on_progress: impl FnMut(&DemoProgress),
 ) -> Result<DemoSummary, DemoError> {
     let world = load_world(&config.sim.world)?;
     let score = std::rc::Rc::new(std::cell::RefCell::new(Score::default()));
     let hook_score = score.clone();
-    let mut hooks = Hooks::until(std::future::pending());
+    let mut hooks = Hooks::until(async move {
+        match stop {
+            DemoStop::CtrlC => {
+                if tokio::signal::ctrl_c().await.is_err() {
+                    std::future::pending::<()>().await;
+                }
+            }
+            DemoStop::TimeLimit => std::future::pending::<()>().await,
+        }
+    });
     hooks.out_dir = Some(out_dir.to_owned());
     hooks.on_scan = Some(Box::new(move |p: &ScanProgress| {
         let mut s = hook_score.borrow_mut();

@@ -6,7 +6,7 @@
 #![allow(clippy::unwrap_used)]
 
 use clsmap::daemon::StopReason;
-use clsmap::demo::{demo_config, run_demo};
+use clsmap::demo::{DemoStop, demo_config, run_demo};
 use clsmap::map::cls::{ClsMap, ClsMapConfig};
 
 #[test]
@@ -16,7 +16,7 @@ fn the_demo_world_is_explored_to_completion_through_the_pty() {
     let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
         .join(format!("demo-{}", std::process::id()));
     let mut reports = 0u64;
-    let summary = run_demo(config, &out, |_| reports += 1).unwrap();
+    let summary = run_demo(config, &out, DemoStop::TimeLimit, |_| reports += 1).unwrap();
     println!("{}", serde_json::to_string_pretty(&summary).unwrap());
     assert_eq!(
         summary.reason,

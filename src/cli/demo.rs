@@ -4,7 +4,7 @@ use std::path::Path;
 use std::process::ExitCode;
 
 use anyhow::{Context as _, bail};
-use clsmap::demo::{DemoProgress, demo_config, run_demo};
+use clsmap::demo::{DemoProgress, DemoStop, demo_config, run_demo};
 use indicatif::{ProgressBar, ProgressStyle};
 
 pub fn demo(out: &Path, world: Option<&str>, seed: Option<u64>) -> anyhow::Result<ExitCode> {
@@ -38,7 +38,7 @@ pub fn demo(out: &Path, world: Option<&str>, seed: Option<u64>) -> anyhow::Resul
             p.scans, p.walls, p.frontiers, p.goals, p.error
         ));
     };
-    let result = run_demo(config, out, on_progress);
+    let result = run_demo(config, out, DemoStop::CtrlC, on_progress);
     bar.finish_and_clear();
     let s = result.context("the demo failed")?;
     println!(
@@ -46,7 +46,7 @@ pub fn demo(out: &Path, world: Option<&str>, seed: Option<u64>) -> anyhow::Resul
         if s.exploration_complete {
             "exploration complete"
         } else {
-            "stopped before exploration completed"
+            "stopped before exploration completed (the map so far is saved)"
         },
         s.run_time_s,
         s.goals,
@@ -79,9 +79,13 @@ pub fn demo(out: &Path, world: Option<&str>, seed: Option<u64>) -> anyhow::Resul
         "wrote {}/{{map.json, map.svg, segments.json, trajectory.tum, demo.json}}",
         s.out_dir.display()
     );
-    Ok(if s.exploration_complete {
-        ExitCode::SUCCESS
-    } else {
-        ExitCode::FAILURE
-    })
+    // Stopped by Ctrl-C is what the user asked for; stopped by the time
+    // limit with frontiers left is a failure of the demo.
+    Ok(
+        if s.exploration_complete || s.reason == clsmap::daemon::StopReason::Shutdown {
+            ExitCode::SUCCESS
+        } else {
+            ExitCode::FAILURE
+        },
+    )
 }

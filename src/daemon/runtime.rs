@@ -62,8 +62,8 @@ pub enum DaemonError {
     Thread(#[source] std::io::Error),
     #[error("cannot start the async runtime")]
     Runtime(#[source] std::io::Error),
-    #[error("the map could not be saved in {tried}: {error}")]
-    Save { tried: String, error: String },
+    #[error("the map could not be saved anywhere; tried {tried}")]
+    Save { tried: String },
 }
 
 /// Why the loop ended.
@@ -446,7 +446,10 @@ impl Daemon {
         };
         let line = status_line(&status, rate, &sensor);
         info!(skipped = self.skipped, "{line}");
-        info!("latency µs p50/p99/max: {}", self.live.latencies().line());
+        let latency = self.live.latencies().line();
+        if !latency.is_empty() {
+            info!("latency µs p50/p99/max: {latency}");
+        }
         self.notifier.status(&line);
     }
 
@@ -604,8 +607,7 @@ impl Daemon {
             }
         }
         Err(DaemonError::Save {
-            tried: "every place".into(),
-            error: tried.join("; "),
+            tried: tried.join("; "),
         })
     }
 }
