@@ -335,6 +335,13 @@ impl OfflineMapper {
         self.odometry.trust_unchanged(true);
     }
 
+    /// The odometry starts over in a new frame (a base reconnected after a
+    /// restart): samples from before are not compared with those after.
+    pub fn odometry_restarted(&mut self) {
+        self.odometry.restart();
+        self.predictor.forget_odometry();
+    }
+
     /// Hands over the poses recorded so far and forgets them, so a mapper
     /// that runs for days keeps its memory bounded (the daemon appends
     /// them to its trajectory file at each checkpoint).

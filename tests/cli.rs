@@ -1111,7 +1111,7 @@ fn run_without_its_sensor_keeps_retrying_and_still_stops_cleanly() {
         &config,
         format!(
             "[sensor]\nport = \"/dev/clsmap-test-no-such-port\"\nretry_initial = 0.2\nretry_max = 0.4\n\
-             [daemon]\nstate_dir = {:?}\nstatus_interval = 0.2\n",
+             [daemon]\nstate_dir = {:?}\nstatus_interval = 0.2\nready_after = 0.5\n",
             dir.join("state").display().to_string()
         ),
     )

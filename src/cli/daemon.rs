@@ -10,6 +10,9 @@ use tokio::signal::unix::{SignalKind, signal};
 use tokio::sync::mpsc;
 use tracing::info;
 
+/// Exit status when the map had to be saved to a rescue directory.
+pub const RESCUED: u8 = 3;
+
 /// A current-thread tokio runtime for the daemon's loop.
 pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
     tokio::runtime::Builder::new_current_thread()
@@ -28,13 +31,16 @@ pub fn run_daemon(config_path: &Path) -> anyhow::Result<ExitCode> {
     })?;
     report(&summary);
     if let Some(why) = &summary.rescued_because {
-        anyhow::bail!(
-            "the map could not be saved where it belongs ({why}); it was rescued to {}",
+        eprintln!(
+            "error: the map could not be saved where it belongs ({why}); it was rescued to {}",
             summary
                 .out_dir
                 .as_deref()
                 .map_or_else(|| "?".into(), |d| d.display().to_string())
         );
+        // Distinct, so systemd does not restart into the same broken place
+        // (RestartPreventExitStatus=3 in systemd/clsmap.service).
+        return Ok(ExitCode::from(RESCUED));
     }
     if summary.reason == StopReason::SensorThreadEnded {
         anyhow::bail!("the sensor thread ended unexpectedly (the map was saved)");

@@ -26,6 +26,7 @@ const WARN_EVERY: f64 = 10.0;
 pub struct BaseDriver {
     connector: Option<BaseConnector>,
     adapter: Option<Box<dyn BaseAdapter + Send>>,
+    ever_connected: bool,
     /// When to try connecting next, and the wait after that (s).
     next_connect: f64,
     retry: f64,
@@ -69,6 +70,7 @@ impl BaseDriver {
         BaseDriver {
             connector,
             adapter: None,
+            ever_connected: false,
             next_connect: f64::NEG_INFINITY,
             retry: retry_initial,
             retry_initial,
@@ -125,7 +127,7 @@ impl BaseDriver {
     /// Connects when due, moves the adapter's clock, hands new odometry to
     /// `live`, and drops a failed base (to connect again later).
     pub fn poll(&mut self, now: f64, live: &mut LiveMapper) {
-        self.connect_if_due(now);
+        self.connect_if_due(now, live);
         let Some(base) = self.adapter.as_mut() else {
             return;
         };
@@ -141,11 +143,14 @@ impl BaseDriver {
             match &health {
                 Health::Ok => info!("base healthy"),
                 Health::Degraded(why) => warn!("base degraded: {why}"),
-                Health::Failed(why) => error!("base failed: {why}; connecting again"),
+                Health::Failed(why) => error!("base failed: {why}; held"),
             }
             self.last_health = Some(health.clone());
         }
-        if matches!(health, Health::Failed(_)) {
+        // A lost link is connected anew; a base reporting a fault over a
+        // working link is held (commands become stops) until it reports
+        // OK: a new connection would forget the fault.
+        if base.link_lost() {
             // Try to leave it standing, then let it go.
             let _ = base.stop(now);
             self.adapter = None;
@@ -156,7 +161,7 @@ impl BaseDriver {
         }
     }
 
-    fn connect_if_due(&mut self, now: f64) {
+    fn connect_if_due(&mut self, now: f64, live: &mut LiveMapper) {
         if self.adapter.is_some() || now < self.next_connect {
             return;
         }
@@ -166,6 +171,11 @@ impl BaseDriver {
         match connect() {
             Ok(adapter) => {
                 info!("base connected");
+                if self.ever_connected {
+                    // A restarted base counts its odometry from zero again.
+                    live.odometry_restarted();
+                }
+                self.ever_connected = true;
                 self.adapter = Some(adapter);
                 self.retry = self.retry_initial;
                 self.last_health = None;
@@ -259,7 +269,10 @@ impl BaseDriver {
         let twist = match manual {
             Some(twist) => twist,
             None if can => live.control(now).0,
-            None => Twist::ZERO,
+            None => {
+                live.hold_exploration(now);
+                Twist::ZERO
+            }
         };
         self.command(twist, !can, now, last_odometry);
     }
@@ -286,6 +299,7 @@ mod tests {
     struct Probe {
         log: Arc<Mutex<Vec<String>>>,
         health: Arc<Mutex<Health>>,
+        lost: Arc<Mutex<bool>>,
         now: f64,
     }
 
@@ -310,6 +324,9 @@ mod tests {
         fn health(&self) -> Health {
             self.health.lock().unwrap().clone()
         }
+        fn link_lost(&self) -> bool {
+            *self.lost.lock().unwrap()
+        }
     }
 
     impl Probe {
@@ -317,6 +334,7 @@ mod tests {
             Probe {
                 log: Arc::default(),
                 health: Arc::new(Mutex::new(Health::Ok)),
+                lost: Arc::default(),
                 now: 0.0,
             }
         }
@@ -327,12 +345,16 @@ mod tests {
         let log = Arc::new(Mutex::new(Vec::new()));
         let health = Arc::new(Mutex::new(Health::Ok));
         let connects = Arc::new(Mutex::new(0));
-        let (l, h, c) = (log.clone(), health.clone(), connects.clone());
+        let lost = Arc::new(Mutex::new(false));
+        let (l, h, c, k) = (log.clone(), health.clone(), connects.clone(), lost.clone());
         let connector: BaseConnector = Box::new(move || {
             *c.lock().unwrap() += 1;
+            // A new connection's link is whole.
+            *k.lock().unwrap() = false;
             Ok(Box::new(Probe {
                 log: l.clone(),
                 health: h.clone(),
+                lost: k.clone(),
                 now: 0.0,
             }) as Box<dyn BaseAdapter + Send>)
         });
@@ -353,8 +375,15 @@ mod tests {
             log.lock().unwrap().iter().filter(|e| *e == "stop").count(),
             1
         );
-        // The base fails: stopped, dropped, connected again after 1 s.
-        *health.lock().unwrap() = Health::Failed("bridge hung up".into());
+        // The base reports a fault: held (no motion), not reconnected.
+        *health.lock().unwrap() = Health::Failed("bumper pressed".into());
+        d.poll(0.95, &mut live);
+        assert!(!d.can_drive(0.95, Some(0.95)));
+        d.command(go, false, 0.96, Some(0.96));
+        assert_eq!(d.last_command(), Twist::ZERO);
+        assert_eq!(*connects.lock().unwrap(), 1);
+        // The link is lost: stopped, dropped, connected again after 1 s.
+        *lost.lock().unwrap() = true;
         d.poll(1.0, &mut live);
         assert!(!d.can_drive(1.0, Some(1.0)));
         *health.lock().unwrap() = Health::Ok;

@@ -59,18 +59,24 @@ impl Checkpoint {
 }
 
 /// Appends `poses` to the TUM file at `path` (created with its header if
-/// new) and syncs it.
+/// new) and syncs it. On failure the file is cut back to its old length,
+/// so the poses, handed back to the caller, are neither half written nor
+/// written twice by the next checkpoint.
 fn append_tum(path: &Path, poses: &[StampedPose]) -> std::io::Result<()> {
     let mut file = std::fs::OpenOptions::new()
         .create(true)
         .append(true)
         .open(path)?;
+    let old_len = file.metadata()?.len();
     let mut text = Vec::new();
-    if file.metadata()?.len() == 0 {
+    if old_len == 0 {
         text.extend_from_slice(TUM_HEADER.as_bytes());
         text.push(b'\n');
     }
     write_tum_lines(&mut text, poses).map_err(std::io::Error::other)?;
-    file.write_all(&text)?;
-    file.sync_data()
+    let written = file.write_all(&text).and_then(|()| file.sync_data());
+    if written.is_err() {
+        let _ = file.set_len(old_len);
+    }
+    written
 }

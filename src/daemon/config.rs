@@ -223,6 +223,13 @@ pub struct LoopConfig {
     pub status_interval: f64,
     /// Stop after this many seconds, saving the map (default 0 = never).
     pub max_run_time: f64,
+    /// systemd hears READY=1 at the first scan, or after this many seconds
+    /// without one (default 10 s). The start counts as complete only at
+    /// READY, and boot waits for it (multi-user.target is ordered after
+    /// the units it wants): a sensor switched off must not hold up the
+    /// robot's boot. The daemon then goes on waiting for the sensor and
+    /// says so in STATUS=.
+    pub ready_after: f64,
 }
 
 impl Default for LoopConfig {
@@ -232,6 +239,7 @@ impl Default for LoopConfig {
             checkpoint_interval: 30.0,
             status_interval: 10.0,
             max_run_time: 0.0,
+            ready_after: 10.0,
         }
     }
 }
@@ -414,6 +422,7 @@ impl DaemonConfig {
         }
         within("daemon.status_interval", d.status_interval, 0.1, 86_400.0)?;
         within("daemon.max_run_time", d.max_run_time, 0.0, 1e9)?;
+        within("daemon.ready_after", d.ready_after, 0.0, 600.0)?;
         self.mapper.validate().map_err(|e| {
             let key = match &e {
                 crate::mapping_config::ConfigError::Range { key, .. } => mapper_key(key),

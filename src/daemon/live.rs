@@ -126,6 +126,17 @@ impl LiveMapper {
         true
     }
 
+    /// The base's odometry starts over in a new frame (the base was
+    /// connected anew): old samples are dropped so none is blended with
+    /// the new ones, and the mapper re-anchors.
+    pub fn odometry_restarted(&mut self) {
+        self.odometry = OdometryTrack::new();
+        if let Some((_, _, odo)) = self.last_fix.as_mut() {
+            *odo = None;
+        }
+        self.mapper.odometry_restarted();
+    }
+
     /// Time of the newest odometry sample (s).
     pub fn last_odometry_time(&self) -> Option<f64> {
         self.odometry.last_time()
@@ -221,6 +232,14 @@ impl LiveMapper {
             log_event(event);
         }
         result
+    }
+
+    /// The base is held at `now` (s) instead of driven; exploration's
+    /// clock for the current goal stops meanwhile.
+    pub fn hold_exploration(&mut self, now: f64) {
+        if let Some(ex) = self.explorer.as_mut() {
+            ex.hold(now);
+        }
     }
 
     pub fn exploration_complete(&self) -> bool {
@@ -336,6 +355,13 @@ mod tests {
         let ahead = live.odometry_at(0.25).unwrap();
         assert!((ahead.x - 0.125).abs() < 1e-9, "{ahead:?}");
         assert!(live.odometry_at(0.35).is_none(), "too far ahead");
+        // A restarted base: nothing from before is blended with what comes.
+        live.odometry_restarted();
+        assert!(live.odometry_at(0.2).is_none());
+        assert!(
+            live.on_odometry(0.1, Pose2::IDENTITY),
+            "a new frame, a new clock start"
+        );
     }
 
     #[test]

@@ -1,5 +1,6 @@
 //! systemd's notification protocol (`Type=notify`): READY once the laser
-//! streams, WATCHDOG pings from the loop, STATUS lines, STOPPING.
+//! streams (or after `ready_after` without it), WATCHDOG pings from the
+//! loop, STATUS lines, STOPPING.
 //!
 //! Outside systemd (`NOTIFY_SOCKET` unset) every call does nothing. The
 //! watchdog is pinged by [`Notifier::loop_alive`], which the loop calls
@@ -46,12 +47,14 @@ impl Notifier {
         }
     }
 
-    /// READY=1, once.
-    pub fn ready(&mut self) {
-        if !self.ready {
-            self.ready = true;
-            self.send(&[NotifyState::Ready]);
+    /// READY=1, once; true the first time.
+    pub fn ready(&mut self) -> bool {
+        if self.ready {
+            return false;
         }
+        self.ready = true;
+        self.send(&[NotifyState::Ready]);
+        true
     }
 
     /// STATUS=… (one line).

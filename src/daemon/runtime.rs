@@ -390,7 +390,7 @@ impl Daemon {
         if self.first_scan_after.is_none() {
             self.first_scan_after = Some(now);
             info!(after_s = now, "first scan mapped; ready");
-            self.notifier.ready();
+            let _ = self.notifier.ready();
         }
         if self.silence_logged {
             info!("scans are back");
@@ -414,6 +414,15 @@ impl Daemon {
         let _span = info_span!("control").entered();
         let now = self.clock();
         self.notifier.loop_alive(Instant::now());
+        if self.first_scan_after.is_none()
+            && now >= self.config.daemon.ready_after
+            && self.notifier.ready()
+        {
+            warn!(
+                after_s = now,
+                "no scan yet: ready anyway, still waiting for the sensor"
+            );
+        }
         self.base.poll(now, &mut self.live);
         let sensor_ok = self.sensor_ok(now);
         if !sensor_ok && self.last_scan_at.is_some() && !self.silence_logged {

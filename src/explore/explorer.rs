@@ -69,14 +69,9 @@ pub struct Explorer {
     memory: ExplorationMemory,
     state: State,
     stats: ExplorerStats,
-    /// When `control` was last called (s): a longer gap is a pause (the
-    /// base held for a silent sensor or stale odometry), and the goal's
-    /// deadline moves on by it.
+    /// When `control` or `hold` was last called (s).
     last_control: Option<f64>,
 }
-
-/// A gap between control calls longer than this (s) is a pause.
-const PAUSE: f64 = 0.5;
 
 impl Explorer {
     /// Starts by settling for `drive.settle_time` from `now` (s), so the
@@ -133,13 +128,7 @@ impl Explorer {
         pose: Pose2,
         now: f64,
     ) -> (Twist, Option<ExplorerEvent>) {
-        let gap = self.last_control.map_or(0.0, |t| now - t);
         self.last_control = Some(now);
-        if gap > PAUSE
-            && let State::Driving { deadline, .. } = &mut self.state
-        {
-            *deadline += gap;
-        }
         match &mut self.state {
             State::Complete { .. } => (Twist::ZERO, None),
             State::Settling { until } => {
@@ -165,6 +154,17 @@ impl Explorer {
                     }
                 }
             }
+        }
+    }
+
+    /// The base is held at `now` (s) — a silent sensor, stale odometry, a
+    /// fault — instead of driven: the goal's deadline moves on by the time
+    /// held, so a pause does not count against the goal.
+    pub fn hold(&mut self, now: f64) {
+        let held = self.last_control.map_or(0.0, |t| (now - t).max(0.0));
+        self.last_control = Some(now);
+        if let State::Driving { deadline, .. } = &mut self.state {
+            *deadline += held;
         }
     }
 
@@ -268,9 +268,12 @@ mod tests {
         let pose = Pose2::new(3.0, 1.5, 0.0);
         ex.control(&open, pose, 1.0);
         assert!(ex.goal().is_some());
-        // A pause (the base held) moves the deadline on.
+        // Held for 39 s: the deadline moves on.
+        for k in 1..=390 {
+            ex.hold(1.0 + 0.1 * k as f64);
+        }
         let (_, event) = ex.control(&open, pose, 40.0);
-        assert_eq!(event, None, "paused for 39 s, not timed out");
+        assert_eq!(event, None, "held for 39 s, not timed out");
         // The robot never moves.
         let (_, event) = ex.control(&open, pose, 40.3);
         assert_eq!(event, None);

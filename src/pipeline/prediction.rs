@@ -64,6 +64,17 @@ impl OdometryFeed {
         }
     }
 
+    /// Forgets every sample: the odometry starts over in a new frame (a
+    /// base reconnected after a restart), keeping the offset and the
+    /// standstill rule.
+    pub fn restart(&mut self) {
+        *self = OdometryFeed {
+            offset: self.offset,
+            unchanged_is_standstill: self.unchanged_is_standstill,
+            ..OdometryFeed::default()
+        };
+    }
+
     /// Takes an unchanged sample as standing still, not as frozen
     /// odometry: right for a live base polled for fresh, timestamped
     /// samples (a stream that stops delivering gives no reading at all).
@@ -169,6 +180,13 @@ fn compose(
 }
 
 impl MotionPredictor {
+    /// Forgets the odometry anchor (the odometry starts over in a new
+    /// frame); the next scan is predicted at constant velocity and anchors
+    /// the new odometry.
+    pub fn forget_odometry(&mut self) {
+        self.anchor = None;
+    }
+
     /// The prediction for the next scan. The first scan defines the map
     /// frame: the identity, known up to the floor that keeps the prior
     /// invertible.

@@ -53,6 +53,13 @@ pub trait BaseAdapter {
     fn stop(&mut self, now: f64) -> Result<(), BaseError>;
     /// Current health.
     fn health(&self) -> Health;
+    /// Whether the link to the base is lost for good (a bridge that hung
+    /// up, a port that vanished): the daemon then connects anew. A base
+    /// that reports a fault over a working link is held, not reconnected,
+    /// since a new connection would forget the fault. Default: never.
+    fn link_lost(&self) -> bool {
+        false
+    }
 }
 
 /// Decides when the odometry stream is too old to keep commanding motion.

@@ -436,6 +436,10 @@ impl<S: LineStream> BaseAdapter for LineBase<S> {
         self.send(Command::Stop)
     }
 
+    fn link_lost(&self) -> bool {
+        self.failure.is_some()
+    }
+
     /// Link failure, then a base `FAULT` (both [`Health::Failed`]), then a
     /// protocol problem seen in the last [`PROBLEM_HOLD`] s (degraded).
     fn health(&self) -> Health {

@@ -353,7 +353,13 @@ impl ClsMap {
     ) -> Result<(), InvariantError> {
         // Untouched shapes apart from the new ones cannot cross them, and
         // they were valid before: only those whose boxes meet take part.
-        let boxes: Vec<_> = new_shapes.iter().map(|s| s.outer.bounds()).collect();
+        // (Every loop's box, holes included: nothing here assumes a hole
+        // lies inside its outer loop; the check is what finds out.)
+        let boxes: Vec<_> = new_shapes
+            .iter()
+            .flat_map(|s| s.loops())
+            .map(|l| l.bounds())
+            .collect();
         let untouched: Vec<usize> = (0..self.shapes.len())
             .filter(|i| {
                 !touched.contains(i)
