@@ -1,13 +1,32 @@
 //! `clsmap demo`: the embedded default, with live progress.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context as _, bail};
 use clsmap::demo::{DemoProgress, DemoStop, demo_config, run_demo};
 use indicatif::{ProgressBar, ProgressStyle};
 
-pub fn demo(out: &Path, world: Option<&str>, seed: Option<u64>) -> anyhow::Result<ExitCode> {
+/// `out/demo`, or the first of `out/demo-2`, `out/demo-3` … without a map.
+fn default_out() -> PathBuf {
+    let holds_map = |p: &Path| p.join(clsmap::pipeline::MAP_FILE).exists();
+    let first = PathBuf::from("out/demo");
+    if !holds_map(&first) {
+        return first;
+    }
+    (2..)
+        .map(|k| PathBuf::from(format!("out/demo-{k}")))
+        .find(|p| !holds_map(p))
+        .unwrap_or(first)
+}
+
+pub fn demo(
+    out: Option<&Path>,
+    world: Option<&str>,
+    seed: Option<u64>,
+) -> anyhow::Result<ExitCode> {
+    let out = out.map_or_else(default_out, Path::to_path_buf);
+    let out = out.as_path();
     let mut config = demo_config().context("the built-in demo configuration is invalid")?;
     if let Some(w) = world {
         config.sim.world = w.to_string();

@@ -37,10 +37,11 @@ enum Command {
     /// Virtual Line Segment Pursuit until no frontier is left, then writes
     /// the map, its picture and the trajectory.
     Demo {
-        /// Where to write map.json, map.svg, trajectory.tum, demo.json
-        /// (must not hold a map already).
-        #[arg(long, default_value = "out/demo")]
-        out: PathBuf,
+        /// Where to write map.json, map.svg, trajectory.tum, demo.json; it
+        /// must not hold a map already. Default: out/demo, or out/demo-2,
+        /// out/demo-3 … when earlier runs are there (none is overwritten).
+        #[arg(long)]
+        out: Option<PathBuf>,
         /// Built-in world (loop, room, corridor, lab, office) or a world
         /// file; default: config/demo.toml's.
         #[arg(long)]
@@ -241,7 +242,7 @@ fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
 
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
-        Command::Demo { out, world, seed } => demo::demo(&out, world.as_deref(), seed),
+        Command::Demo { out, world, seed } => demo::demo(out.as_deref(), world.as_deref(), seed),
         Command::Run { config } => daemon::run_daemon(&config),
         Command::Probe { port } => sensor::probe(&port),
         Command::Record {
