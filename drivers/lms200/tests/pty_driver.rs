@@ -108,7 +108,11 @@ fn every_variant_streams_at_500k() {
                 "{variant:?}: {:?}",
                 seen.value_counts
             );
-            assert_eq!(seen.stats.dropped_frames, 0, "{variant:?}: {seen:?}");
+            // On a loaded machine the emulator's thread can see the host's
+            // switch to 500 kBd a moment late and garble the telegram in
+            // flight, as a real sensor would; the decoder drops it and
+            // resyncs. More than that is a fault.
+            assert!(seen.stats.dropped_frames <= 1, "{variant:?}: {seen:?}");
         }
     }
 }
