@@ -13,22 +13,14 @@ use std::hint::black_box;
 use clsmap::geometry::{CogLine, ExtractionConfig, Pose2, extract_lines};
 use clsmap::localize::global::{GlobalConfig, GlobalMap, global_localize};
 use clsmap::map::cls::{ClsMap, ClsMapConfig};
-use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
+use clsmap::sim::{ROOM_WITH_BOXES_TOUR, Rng, ScanSpec, World, cast_scan};
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 
 const COV: [[f64; 3]; 3] = [[1e-6, 0.0, 0.0], [0.0, 1e-6, 0.0], [0.0, 0.0, 1e-7]];
 
 /// The room's actual segments after a run round its furniture.
 fn room_lines(world: &World) -> Vec<CogLine> {
-    let waypoints: [[f64; 2]; 7] = [
-        [2.0, 2.0],
-        [5.0, 2.5],
-        [6.8, 3.0],
-        [5.0, 4.4],
-        [3.4, 3.2],
-        [1.8, 2.6],
-        [2.0, 2.0],
-    ];
+    let waypoints = ROOM_WITH_BOXES_TOUR;
     let spec = ScanSpec::lms200_half_degree(0.01);
     let ecfg = ExtractionConfig::default();
     let mut rng = Rng::new(3);

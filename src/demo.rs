@@ -18,7 +18,7 @@ use serde::Serialize;
 use crate::daemon::runtime::{DaemonError, Hooks, RunSummary, ScanProgress, StopReason, run};
 use crate::daemon::simulation::load_world;
 use crate::daemon::{DaemonConfig, DaemonConfigError, StageSummary};
-use crate::geometry::{Pose2, wrap_angle};
+use crate::geometry::{Pose2, point_segment_distance, wrap_angle};
 use crate::map::cls::{ClsMap, ClsMapConfig, StoreError};
 use crate::pipeline::MAP_FILE;
 use crate::sim::World;
@@ -147,17 +147,6 @@ pub fn walls_on_world(map: &ClsMap, world: &World, origin: Pose2, tolerance: f64
         }
     }
     good as f64 / total.max(1) as f64
-}
-
-fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    let len2 = dx * dx + dy * dy;
-    let t = if len2 > 0.0 {
-        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
 }
 
 /// When the demo stops before exploration completes.

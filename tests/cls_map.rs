@@ -14,7 +14,7 @@ use clsmap::map::cls::{
     ClsError, ClsMap, ClsMapConfig, GridConfig, LocalMapConfig, SegmentMode, StoreError,
     occupancy_grid, picture,
 };
-use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
+use clsmap::sim::{ROOM_WITH_BOXES_TOUR, Rng, ScanSpec, World, cast_scan};
 use common::{path, point_segment_distance};
 
 const COV: [[f64; 3]; 3] = [[1e-6, 0.0, 0.0], [0.0, 1e-6, 0.0], [0.0, 0.0, 1e-7]];
@@ -180,18 +180,7 @@ fn assert_quality(name: &str, run: &Run, world: &World) {
 #[test]
 fn room_with_boxes_and_chair_legs() {
     let world = World::room_with_boxes();
-    let poses = path(
-        &[
-            [2.0, 2.0],
-            [5.0, 2.5],
-            [6.8, 3.0],
-            [5.0, 4.4],
-            [3.4, 3.2],
-            [1.8, 2.6],
-            [2.0, 2.0],
-        ],
-        0.3,
-    );
+    let poses = path(&ROOM_WITH_BOXES_TOUR, 0.3);
     let run = drive(&world, &poses, 11);
     assert!(run.updates >= poses.len() * 9 / 10);
     assert_quality("room", &run, &world);

@@ -522,6 +522,26 @@ fn a_gap_narrower_than_the_robot_is_a_typed_error() {
     ));
 }
 
+/// A 12 m × 8 m room with one turned box per 4 m × 4 m cell (so boxes
+/// never overlap): `(u, v)` place it in its cell, `(hx, hy)` are its half
+/// sizes, `a` its angle.
+fn box_field(boxes: &[(f64, f64, f64, f64, f64)]) -> ClsMap {
+    let outer = [[0.0, 0.0], [12.0, 0.0], [12.0, 8.0], [0.0, 8.0]];
+    let holes: Vec<_> = boxes
+        .iter()
+        .enumerate()
+        .map(|(i, &(u, v, hx, hy, a))| {
+            let cell = [(i % 3) as f64 * 4.0, (i / 3) as f64 * 4.0];
+            obstacle(
+                [cell[0] + 1.2 + 1.6 * u, cell[1] + 1.2 + 1.6 * v],
+                [hx, hy],
+                a,
+            )
+        })
+        .collect();
+    map_with(&outer, &holes)
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
 
@@ -536,17 +556,7 @@ proptest! {
         start in (0.3f64..11.7, 0.3f64..7.7),
         goal in (0.3f64..11.7, 0.3f64..7.7),
     ) {
-        // One box per 4 m × 4 m cell (6 cells), so boxes never overlap.
-        let outer = [[0.0, 0.0], [12.0, 0.0], [12.0, 8.0], [0.0, 8.0]];
-        let holes: Vec<_> = boxes
-            .iter()
-            .enumerate()
-            .map(|(i, &(u, v, hx, hy, a))| {
-                let cell = [(i % 3) as f64 * 4.0, (i / 3) as f64 * 4.0];
-                obstacle([cell[0] + 1.2 + 1.6 * u, cell[1] + 1.2 + 1.6 * v], [hx, hy], a)
-            })
-            .collect();
-        let map = map_with(&outer, &holes);
+        let map = box_field(&boxes);
         let r = 0.32;
         let free = FreeSpace::from_map(&map, r).unwrap();
         let (s, g) = ([start.0, start.1], [goal.0, goal.1]);
@@ -604,16 +614,7 @@ proptest! {
         start in (0.3f64..11.7, 0.3f64..7.7),
         goal in (0.3f64..11.7, 0.3f64..7.7),
     ) {
-        let outer = [[0.0, 0.0], [12.0, 0.0], [12.0, 8.0], [0.0, 8.0]];
-        let holes: Vec<_> = boxes
-            .iter()
-            .enumerate()
-            .map(|(i, &(u, v, hx, hy, a))| {
-                let cell = [(i % 3) as f64 * 4.0, (i / 3) as f64 * 4.0];
-                obstacle([cell[0] + 1.2 + 1.6 * u, cell[1] + 1.2 + 1.6 * v], [hx, hy], a)
-            })
-            .collect();
-        let map = map_with(&outer, &holes);
+        let map = box_field(&boxes);
         let r = 0.32;
         let free = FreeSpace::from_map(&map, r).unwrap();
         let (s, g) = ([start.0, start.1], [goal.0, goal.1]);

@@ -12,7 +12,7 @@ use clsmap::localize::global::{
     GlobalConfig, GlobalMap, GlobalResult, disambiguate, global_localize,
 };
 use clsmap::map::cls::{ClsMap, ClsMapConfig};
-use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
+use clsmap::sim::{ROOM_WITH_BOXES_TOUR, Rng, ScanSpec, World, cast_scan};
 use common::{path, point_segment_distance as distance_to_segment};
 
 /// Well-known pose covariance used while building the map (m², rad²).
@@ -122,18 +122,7 @@ impl Rates {
 #[test]
 fn furnished_room_scans_are_localized_without_a_prediction() {
     let world = World::room_with_boxes();
-    let poses = path(
-        &[
-            [2.0, 2.0],
-            [5.0, 2.5],
-            [6.8, 3.0],
-            [5.0, 4.4],
-            [3.4, 3.2],
-            [1.8, 2.6],
-            [2.0, 2.0],
-        ],
-        0.3,
-    );
+    let poses = path(&ROOM_WITH_BOXES_TOUR, 0.3);
     let map = build_map(&world, &poses, 21);
     let gmap = global_map(&map);
     let cfg = GlobalConfig::default();

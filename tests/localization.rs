@@ -7,7 +7,9 @@
 
 #![allow(clippy::unwrap_used)]
 
-use clsmap::geometry::{CogLine, ExtractionConfig, Pose2, RangeNoise, extract_lines, wrap_angle};
+use clsmap::geometry::{
+    CogLine, ExtractionConfig, Pose2, RangeNoise, extract_lines, point_segment_distance, wrap_angle,
+};
 use clsmap::localize::{
     LineConstraints, LocalizationResult, LocalizeError, LocalizerConfig, SegmentIndex, localize,
 };
@@ -76,17 +78,6 @@ impl Place {
             }
         }
     }
-}
-
-fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let (ex, ey) = (b[0] - a[0], b[1] - a[1]);
-    let len2 = ex * ex + ey * ey;
-    let t = if len2 > 0.0 {
-        (((p[0] - a[0]) * ex + (p[1] - a[1]) * ey) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p[0] - a[0] - t * ex).hypot(p[1] - a[1] - t * ey)
 }
 
 fn extraction_config(sigma: f64) -> ExtractionConfig {

@@ -98,6 +98,11 @@ impl LiveMapper {
         }
     }
 
+    /// Scans taken up so far.
+    pub fn scans(&self) -> u64 {
+        self.scans
+    }
+
     pub fn mapper(&self) -> &OfflineMapper {
         &self.mapper
     }

@@ -476,7 +476,7 @@ impl Daemon {
 
     /// Starts writing a checkpoint on a blocking thread.
     fn start_checkpoint(&mut self) -> Option<JoinHandle<Result<(), CheckpointFailed>>> {
-        if self.live.status().scans == 0 {
+        if self.live.scans() == 0 {
             return None;
         }
         let dir = match self.out_dir() {
@@ -586,7 +586,7 @@ impl Daemon {
     /// rescue directory beside it, then under the system's temporary
     /// directory. Returns where it went and, if rescued, why.
     fn save(&mut self) -> Result<(Option<PathBuf>, Option<String>), DaemonError> {
-        if self.live.status().scans == 0 {
+        if self.live.scans() == 0 {
             info!("no scan was mapped: nothing to save");
             return Ok((None, None));
         }

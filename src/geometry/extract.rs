@@ -223,6 +223,7 @@ pub fn scan_points(scan: &RangeScan, mount: &Pose2, cfg: &ExtractionConfig) -> V
 mod tests {
     use super::*;
     use crate::geometry::BeamFault;
+    use crate::geometry::point_segment_distance;
     use crate::sim::{Rng, ScanSpec, World, cast_scan};
     use proptest::prelude::*;
     use std::f64::consts::TAU;
@@ -232,12 +233,6 @@ mod tests {
         y: 0.05,
         theta: 0.02,
     };
-
-    fn point_segment_distance(p: [f64; 2], [a, b]: [[f64; 2]; 2]) -> f64 {
-        let (ex, ey) = (b[0] - a[0], b[1] - a[1]);
-        let t = (((p[0] - a[0]) * ex + (p[1] - a[1]) * ey) / (ex * ex + ey * ey)).clamp(0.0, 1.0);
-        (p[0] - a[0] - t * ex).hypot(p[1] - a[1] - t * ey)
-    }
 
     fn room_scan(robot: Pose2, sigma: f64, seed: u64) -> RangeScan {
         cast_scan(
@@ -269,8 +264,8 @@ mod tests {
             for l in &lines {
                 let m = l.transformed(&robot);
                 let on_wall = world.walls().iter().any(|&w| {
-                    point_segment_distance(m.start, w) < 1e-3
-                        && point_segment_distance(m.end, w) < 1e-3
+                    point_segment_distance(m.start, w[0], w[1]) < 1e-3
+                        && point_segment_distance(m.end, w[0], w[1]) < 1e-3
                 });
                 assert!(on_wall, "pose {k}: {m:?} is on no wall");
                 let sensor = MOUNT.transform_point([0.0, 0.0]);

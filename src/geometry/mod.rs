@@ -12,3 +12,16 @@ pub use cog_line::CogLine;
 pub use extract::{ExtractionConfig, LineExtractor, RangeNoise, extract_lines, scan_points};
 pub use pose::{Pose2, wrap_angle, wrap_angle_positive};
 pub use scan::{BeamFault, RangeScan};
+
+/// Distance (m) from `p` to the closed segment `ab` (to `a` when the
+/// segment has no length).
+pub fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let e = [b[0] - a[0], b[1] - a[1]];
+    let len2 = e[0] * e[0] + e[1] * e[1];
+    let t = if len2 > 0.0 {
+        (((p[0] - a[0]) * e[0] + (p[1] - a[1]) * e[1]) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p[0] - a[0] - t * e[0]).hypot(p[1] - a[1] - t * e[1])
+}

@@ -14,5 +14,5 @@ pub use laser::{Carrier, WorldRangeSource};
 pub use rng::Rng;
 pub use robot::{SimRobot, SimRobotBase};
 pub use tour::Tour;
-pub use world::World;
+pub use world::{ROOM_WITH_BOXES_TOUR, World};
 pub use world_file::{LineProblem, WorldFile, WorldFileError};

@@ -14,6 +14,18 @@ pub struct World {
     bvh: Bvh,
 }
 
+/// A closed tour round the furniture of [`World::room_with_boxes`], clear
+/// of every obstacle (m): the run that maps the room in tests and benches.
+pub const ROOM_WITH_BOXES_TOUR: [[f64; 2]; 7] = [
+    [2.0, 2.0],
+    [5.0, 2.5],
+    [6.8, 3.0],
+    [5.0, 4.4],
+    [3.4, 3.2],
+    [1.8, 2.6],
+    [2.0, 2.0],
+];
+
 impl World {
     /// An empty world.
     pub fn new() -> Self {

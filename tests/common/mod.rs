@@ -27,14 +27,4 @@ pub fn path(waypoints: &[[f64; 2]], step: f64) -> Vec<Pose2> {
     out
 }
 
-/// Distance from `p` to the segment `a`–`b` (m).
-pub fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let e = [b[0] - a[0], b[1] - a[1]];
-    let len2 = e[0] * e[0] + e[1] * e[1];
-    let t = if len2 > 0.0 {
-        (((p[0] - a[0]) * e[0] + (p[1] - a[1]) * e[1]) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p[0] - a[0] - t * e[0]).hypot(p[1] - a[1] - t * e[1])
-}
+pub use clsmap::geometry::point_segment_distance;

@@ -511,7 +511,8 @@ impl ClsMap {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-    use crate::map::cls::local::{LocalEdge, point_segment_distance};
+    use crate::geometry::point_segment_distance;
+    use crate::map::cls::local::LocalEdge;
     use crate::map::cls::loops::polygon;
 
     fn square(x0: f64, y0: f64, x1: f64, y1: f64, clockwise: bool) -> ClsLoop {

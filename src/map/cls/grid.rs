@@ -197,25 +197,11 @@ pub fn occupancy_grid(map: &ClsMap, cfg: &GridConfig) -> Result<OccupancyGrid, G
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-    use crate::map::cls::cls_map::ClsMapConfig;
-    use crate::map::cls::loops::{ClsLoop, ClsSegment, ClsShape, SegmentMode};
 
+    /// A 4 m × 3 m room: the bottom and right walls seen, the rest open.
     fn room() -> ClsMap {
         let pts = [[0.0, 0.0], [4.0, 0.0], [4.0, 3.0], [0.0, 3.0]];
-        let segments = (0..4)
-            .map(|i| {
-                let mut s = ClsSegment::virtual_between(pts[i], pts[(i + 1) % 4]);
-                if i < 2 {
-                    s.mode = SegmentMode::Actual;
-                }
-                s
-            })
-            .collect();
-        let shape = ClsShape {
-            outer: ClsLoop::new(segments),
-            holes: vec![],
-        };
-        ClsMap::from_shapes(ClsMapConfig::default(), vec![shape]).unwrap()
+        crate::explore::pursuit::tests::map_of(&pts, &[2, 3])
     }
 
     #[test]

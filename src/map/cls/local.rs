@@ -39,7 +39,7 @@
 //! conservative reading). A wedge of at least π without any valid point in
 //! it cannot be closed this way and makes the scan unusable.
 
-use crate::geometry::{CogLine, Pose2, RangeScan, wrap_angle};
+use crate::geometry::{CogLine, Pose2, RangeScan, point_segment_distance, wrap_angle};
 use std::f64::consts::PI;
 
 /// Tuning of the local map; SI units.
@@ -136,18 +136,6 @@ impl LocalRegion {
         }
         inside && nearest > tolerance
     }
-}
-
-/// Distance (m) from `p` to the closed segment `ab`.
-pub(crate) fn point_segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let e = [b[0] - a[0], b[1] - a[1]];
-    let len2 = e[0] * e[0] + e[1] * e[1];
-    let t = if len2 > 0.0 {
-        (((p[0] - a[0]) * e[0] + (p[1] - a[1]) * e[1]) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p[0] - a[0] - t * e[0]).hypot(p[1] - a[1] - t * e[1])
 }
 
 /// Why a scan gives no local region.
