@@ -7,6 +7,7 @@ pub mod durable;
 pub mod eval;
 pub mod explore;
 pub mod geometry;
+pub mod graph;
 pub mod input;
 pub mod localize;
 pub mod map;

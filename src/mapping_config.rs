@@ -18,6 +18,7 @@
 //! ```
 
 use crate::geometry::{ExtractionConfig, Pose2};
+use crate::graph::LoopClosureConfig;
 use crate::localize::{CorrespondenceConfig, LocalizerConfig};
 use crate::map::cls::{ClsMapConfig, RegionConfig};
 use crate::map::{KeyframeConfig, SegmentMapConfig};
@@ -142,6 +143,8 @@ pub struct MapperConfig {
     pub previous_scan_fallback: bool,
     /// The Closed Line Segment map grown on keyframes.
     pub cls: ClsTuning,
+    /// Loop closure and the keyframe pose graph.
+    pub loop_closure: LoopClosureConfig,
 }
 
 impl Default for MapperConfig {
@@ -158,6 +161,7 @@ impl Default for MapperConfig {
             update_map_when_unlocalized: false,
             previous_scan_fallback: true,
             cls: ClsTuning::default(),
+            loop_closure: LoopClosureConfig::default(),
         }
     }
 }
@@ -327,6 +331,46 @@ impl MapperConfig {
             c.region.sliver_width,
             NonNegative,
         )?;
+        let (x, lc) = ("loop_closure", &self.loop_closure);
+        for (key, value) in [
+            ("min_travel", lc.min_travel),
+            ("search_margin", lc.search_margin),
+            ("drift_per_metre", lc.drift_per_metre),
+            ("max_search_radius", lc.max_search_radius),
+            ("heading_margin", lc.heading_margin),
+            ("heading_drift_per_metre", lc.heading_drift_per_metre),
+            ("min_matched_length", lc.min_matched_length),
+            ("max_free_space_conflict", lc.max_free_space_conflict),
+            ("free_space_tolerance", lc.free_space_tolerance),
+            ("chain_sigma_xy_per_metre", lc.chain_sigma_xy_per_metre),
+            (
+                "chain_sigma_theta_per_metre",
+                lc.chain_sigma_theta_per_metre,
+            ),
+            (
+                "chain_sigma_theta_per_radian",
+                lc.chain_sigma_theta_per_radian,
+            ),
+            ("optimize_above_chi2", lc.optimize_above_chi2),
+        ] {
+            v.check(x, key, value, NonNegative)?;
+        }
+        for (key, value) in [
+            ("loop_sigma_xy", lc.loop_sigma_xy),
+            ("loop_sigma_theta", lc.loop_sigma_theta),
+            ("chain_sigma_xy", lc.chain_sigma_xy),
+            ("chain_sigma_theta", lc.chain_sigma_theta),
+        ] {
+            v.check(x, key, value, Positive)?;
+        }
+        v.check(x, "ambiguity_ratio", lc.ambiguity_ratio, Positive)?;
+        v.check(x, "max_candidates", lc.max_candidates as f64, AtLeast(1.0))?;
+        v.check(x, "min_matches", lc.min_matches as f64, AtLeast(2.0))?;
+        v.check(x, "vote_every", lc.vote_every as f64, AtLeast(1.0))?;
+        let (x, oc) = ("loop_closure.optimizer", &lc.optimizer);
+        v.check(x, "max_iterations", oc.max_iterations as f64, AtLeast(1.0))?;
+        v.check(x, "converged_step", oc.converged_step, Positive)?;
+        v.check(x, "loop_kernel", oc.loop_kernel, NonNegative)?;
         Ok(())
     }
 }

@@ -20,10 +20,12 @@
 
 use crate::eval::{EvalError, RelationErrors, evaluate_relations as evaluate_against};
 use crate::geometry::{CogLine, LineExtractor, Pose2, wrap_angle};
+use crate::graph::{Correction, KeyframeGraph, LoopStats};
 use crate::input::{InputError, ScanRecord, open_log};
+use crate::localize::global::GlobalConfig;
 use crate::localize::{LocalizationResult, LocalizeError, SegmentIndex, localize};
-use crate::map::cls::{ClsMap, picture};
-use crate::map::{KeyframePolicy, SegmentMap, SegmentMapFile};
+use crate::map::cls::{ClsError, ClsMap, local_region, picture};
+use crate::map::{Keyframe, KeyframePolicy, SegmentMap, SegmentMapFile};
 use crate::mapping_config::MapperConfig;
 use crate::trajectory::{StampedPose, TrajectoryError, write_tum};
 use nalgebra::{Matrix3, Vector3};
@@ -171,6 +173,8 @@ pub struct MappingSummary {
     /// Scans whose odometry equalled the previous scan's (standing still,
     /// or odometry frozen); predicted at constant velocity.
     pub scans_with_unchanged_odometry: usize,
+    /// Loop closure: searches, loops accepted and rejected, optimisations.
+    pub loops: LoopStats,
     pub mean_time: StageTimes,
 }
 
@@ -230,6 +234,17 @@ pub struct OfflineMapper {
     /// when the map offers too little to localize against.
     previous_scan: SegmentIndex,
     trajectory: Vec<StampedPose>,
+    /// Per trajectory entry: the keyframe it was taken after and its pose
+    /// in that keyframe's frame, so loop closures can move it with them.
+    anchors: Vec<Option<(usize, Pose2)>>,
+    /// The keyframes and their pose graph, from which the maps are rebuilt
+    /// after a loop closure.
+    graph: KeyframeGraph,
+    /// Whether a rebuild of the CLS map after a loop closure waits for
+    /// [`OfflineMapper::refresh_cls_map`] (offline runs, which need it
+    /// only at the end), and whether one is waiting.
+    defer_cls_rebuild: bool,
+    cls_stale: bool,
     summary: MappingSummary,
     clocks: [StageClock; 6],
 }
@@ -254,6 +269,10 @@ impl OfflineMapper {
             predictor: MotionPredictor::default(),
             previous_scan: SegmentIndex::new(),
             trajectory: Vec::new(),
+            anchors: Vec::new(),
+            graph: KeyframeGraph::new(),
+            defer_cls_rebuild: false,
+            cls_stale: false,
             summary: MappingSummary::default(),
             clocks: [StageClock::default(); 6],
         }
@@ -267,9 +286,34 @@ impl OfflineMapper {
         &self.map
     }
 
-    /// The Closed Line Segment map grown so far.
+    /// The Closed Line Segment map grown so far (out of date after a loop
+    /// closure while its rebuild is deferred; see
+    /// [`defer_cls_rebuild`](Self::defer_cls_rebuild)).
     pub fn cls_map(&self) -> &ClsMap {
         &self.cls
+    }
+
+    /// The keyframes and their pose graph.
+    pub fn keyframe_graph(&self) -> &KeyframeGraph {
+        &self.graph
+    }
+
+    /// After a loop closure, rebuild the CLS map only when
+    /// [`refresh_cls_map`](Self::refresh_cls_map) asks (an offline run needs
+    /// it once, at the end); meanwhile keyframes do not grow it.
+    pub fn defer_cls_rebuild(&mut self) {
+        self.defer_cls_rebuild = true;
+    }
+
+    /// Rebuilds the CLS map from the keyframes if a loop closure moved
+    /// them since it was grown.
+    pub fn refresh_cls_map(&mut self) {
+        if self.cls_stale {
+            let (cls, refused) = self.graph.rebuild_cls(self.config.cls_map());
+            self.cls = cls;
+            self.summary.cls_rejected = refused;
+            self.cls_stale = false;
+        }
     }
 
     /// One pose per scan processed so far (s, map frame).
@@ -284,6 +328,7 @@ impl OfflineMapper {
         s.cls_actual = self.cls.actual_segments().count();
         s.cls_virtual = self.cls.virtual_segments().count();
         s.cls_loops = self.cls.loops().count();
+        s.loops = self.graph.stats().clone();
         s.mean_time = StageTimes {
             predict_us: self.clocks[PREDICT].mean_us(),
             extract_us: self.clocks[EXTRACT].mean_us(),
@@ -346,6 +391,7 @@ impl OfflineMapper {
     /// that runs for days keeps its memory bounded (the daemon appends
     /// them to its trajectory file at each checkpoint).
     pub fn take_trajectory(&mut self) -> Vec<StampedPose> {
+        self.anchors.clear();
         std::mem::take(&mut self.trajectory)
     }
 
@@ -388,6 +434,28 @@ impl OfflineMapper {
                 Ok(fix)
             }
             other => other.map_err(Rejection::Localize),
+        }
+    }
+
+    /// A loop closure moved the keyframes: the current pose, the
+    /// predictor, the keyframe policy and the trajectory follow them, and
+    /// the maps are rebuilt from the keyframes at their new poses.
+    fn apply_correction(&mut self, c: &Correction, outcome: &mut ScanOutcome) {
+        let poses = self.graph.poses();
+        if let Some(newest) = poses.last() {
+            outcome.pose = *newest;
+        }
+        self.predictor.reframe(&c.correction);
+        self.keyframes.reframe(outcome.pose);
+        for ((_, pose), anchor) in self.trajectory.iter_mut().zip(&self.anchors) {
+            if let Some((k, relative)) = anchor {
+                *pose = poses[*k].compose(relative);
+            }
+        }
+        self.map = self.graph.rebuild_walls(self.config.map);
+        self.cls_stale = true;
+        if !self.defer_cls_rebuild {
+            self.refresh_cls_map();
         }
     }
 
@@ -496,15 +564,45 @@ impl OfflineMapper {
                 .in_scope(|| self.map.update(&self.lines, &outcome.pose, &cov));
             self.clocks[MAP_UPDATE].add(t.elapsed());
             let t = Instant::now();
-            let grown = trace_span!("cls_update").in_scope(|| {
-                self.cls
-                    .update(&self.lines, &record.scan, outcome.pose, cov)
-            });
+            let region = local_region(&self.lines, &record.scan, &self.cls.config().local);
+            // A map waiting for its rebuild is not grown: the rebuild
+            // takes this keyframe too.
+            if !self.cls_stale {
+                let grown = trace_span!("cls_update").in_scope(|| match &region {
+                    Ok(local) => self.cls.add_keyframe(&self.lines, local, outcome.pose, cov),
+                    Err(e) => Err(ClsError::Local(e.clone())),
+                });
+                if let Err(e) = grown {
+                    // The CLS map refuses an update whole and stays valid.
+                    self.summary.cls_rejected += 1;
+                    debug!(t = record.scan.t, "CLS map update refused: {e}");
+                }
+            }
             self.clocks[CLS_UPDATE].add(t.elapsed());
-            if let Err(e) = grown {
-                // The CLS map refuses an update whole and stays valid.
-                self.summary.cls_rejected += 1;
-                debug!(t = record.scan.t, "CLS map update refused: {e}");
+            let first = self.graph.is_empty();
+            let keyframe = Keyframe {
+                t: record.scan.t,
+                lines: self.lines.clone(),
+                region: region.ok(),
+                covariance: cov,
+                travelled: 0.0,
+            };
+            self.graph.add(
+                keyframe,
+                outcome.pose,
+                outcome.localized || first,
+                &self.config.loop_closure,
+            );
+            let closed = self.graph.close_loop(
+                &self.config.map,
+                &self.config.localizer,
+                &GlobalConfig::default(),
+                &self.config.loop_closure,
+            );
+            match closed {
+                Ok(Some(correction)) => self.apply_correction(&correction, &mut outcome),
+                Ok(None) => {}
+                Err(e) => warn!(t = record.scan.t, "pose graph not optimised: {e}"),
             }
             outcome.keyframe = true;
             self.summary.keyframes += 1;
@@ -518,6 +616,9 @@ impl OfflineMapper {
             }
         }
         self.trajectory.push((record.scan.t, outcome.pose));
+        let newest = self.graph.len().checked_sub(1);
+        self.anchors
+            .push(newest.map(|k| (k, self.graph.poses()[k].between(&outcome.pose))));
         self.summary.scans += 1;
         self.clocks[WHOLE].add(started.elapsed());
         outcome
@@ -591,6 +692,7 @@ pub fn run_offline_mapping(
 ) -> Result<MappingSummary, PipelineError> {
     let mut log = open_log(input)?;
     let mut mapper = OfflineMapper::new(*config);
+    mapper.defer_cls_rebuild();
     let mut input_broken = None;
     while let Some(record) = log.next() {
         let record = match record {
@@ -612,6 +714,7 @@ pub fn run_offline_mapping(
     if mapper.trajectory().is_empty() {
         return Err(PipelineError::NoScans);
     }
+    mapper.refresh_cls_map();
     let mut summary = mapper.summary();
     summary.input_broken = input_broken;
     if summary.rejected_localizations > 0 {

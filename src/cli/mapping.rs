@@ -61,6 +61,19 @@ pub fn map(
         "  mean time per scan:         {:.1} µs (extraction {:.1}, localization {:.1}; per keyframe: segment map {:.1}, CLS map {:.1})",
         t.per_scan_us, t.extract_us, t.localize_us, t.map_update_us, t.cls_update_us
     );
+    let l = &summary.loops;
+    println!(
+        "  loop closure:               {} loops closed ({} by voting) in {} searches, rejected {:?}; {} optimisations ({} loops down-weighted); search {:.0} ms, optimisation {:.0} ms, rebuilds {:.0} ms",
+        l.accepted,
+        l.by_voting,
+        l.searched,
+        l.rejected,
+        l.optimisations,
+        l.down_weighted,
+        l.search_s * 1e3,
+        l.optimise_s * 1e3,
+        l.rebuild_s * 1e3
+    );
     if let Some(broken) = &summary.input_broken {
         println!("  input broke off:            {broken} (the scans before it were mapped)");
     }

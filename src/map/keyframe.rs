@@ -7,8 +7,27 @@
 //! some travel gives the map views with more independent errors and costs
 //! less time.
 
-use crate::geometry::{Pose2, wrap_angle};
+use crate::geometry::{CogLine, Pose2, wrap_angle};
+use crate::map::cls::LocalRegion;
 use serde::{Deserialize, Serialize};
+
+/// What a keyframe keeps of its scan: enough to rebuild the walls and the
+/// CLS region at any pose (the pose itself lives in the pose graph).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Keyframe {
+    /// Scan time (s).
+    pub t: f64,
+    /// The scan's lines (robot frame, scan order).
+    pub lines: Vec<CogLine>,
+    /// The scan's local CLS region (robot frame); `None` when the scan
+    /// gave none (too few valid beams).
+    pub region: Option<LocalRegion>,
+    /// Pose covariance when the keyframe was taken (x, y, θ; m², m·rad,
+    /// rad²): how much the fusion blurs its lines.
+    pub covariance: [[f64; 3]; 3],
+    /// Path length from the first keyframe to this one (m).
+    pub travelled: f64,
+}
 
 /// Keyframe thresholds.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -49,6 +68,14 @@ impl KeyframePolicy {
     /// Takes new thresholds; the last keyframe stays the reference.
     pub fn retune(&mut self, config: KeyframeConfig) {
         self.config = config;
+    }
+
+    /// Moves the reference keyframe pose with the map frame (after the
+    /// pose graph corrected it).
+    pub fn reframe(&mut self, pose: Pose2) {
+        if self.last.is_some() {
+            self.last = Some(pose);
+        }
     }
 
     /// Whether a scan taken at `pose` (map frame) should update the map;

@@ -5,7 +5,7 @@ pub mod cls;
 pub mod keyframe;
 pub mod segment_map;
 
-pub use keyframe::{KeyframeConfig, KeyframePolicy};
+pub use keyframe::{Keyframe, KeyframeConfig, KeyframePolicy};
 pub use segment_map::{
     MapSegment, SegmentMap, SegmentMapConfig, SegmentMapFile, UpdateStats, blur_by_pose, fuse,
 };

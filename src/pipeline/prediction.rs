@@ -187,6 +187,19 @@ impl MotionPredictor {
         self.anchor = None;
     }
 
+    /// Moves the poses the predictor holds into a corrected map frame:
+    /// `correction ∘ pose` (after a loop closure moved the map under the
+    /// robot). The covariances are kept; the correction's rotation is small
+    /// next to their own uncertainty.
+    pub fn reframe(&mut self, correction: &Pose2) {
+        if let Some((pose, _)) = &mut self.last {
+            *pose = correction.compose(pose);
+        }
+        if let Some(anchor) = &mut self.anchor {
+            anchor.pose = correction.compose(&anchor.pose);
+        }
+    }
+
     /// The prediction for the next scan. The first scan defines the map
     /// frame: the identity, known up to the floor that keeps the prior
     /// invertible.

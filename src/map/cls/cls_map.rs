@@ -22,6 +22,19 @@ use super::shapes::{group_loops, to_shapes, whole_contours};
 use super::store::{StoreError, load_items, save_items};
 use super::window::Window;
 
+/// Refuses a pose or covariance that is not finite.
+fn check_pose(pose: &Pose2, pose_cov: &[[f64; 3]; 3]) -> Result<(), ClsError> {
+    let finite = [pose.x, pose.y, pose.theta]
+        .iter()
+        .chain(pose_cov.iter().flatten())
+        .all(|v| v.is_finite());
+    if finite {
+        Ok(())
+    } else {
+        Err(ClsError::BadPose)
+    }
+}
+
 /// Tuning of the CLS map.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -208,15 +221,22 @@ impl ClsMap {
         pose: Pose2,
         pose_cov: [[f64; 3]; 3],
     ) -> Result<ClsUpdateStats, ClsError> {
-        let finite = [pose.x, pose.y, pose.theta]
-            .iter()
-            .chain(pose_cov.iter().flatten())
-            .all(|v| v.is_finite());
-        if !finite {
-            return Err(ClsError::BadPose);
-        }
-        let local = local_region(lines, scan, &self.config.local)?.transformed(&pose);
-        self.add_region(&local, lines, pose, pose_cov)
+        check_pose(&pose, &pose_cov)?;
+        let local = local_region(lines, scan, &self.config.local)?;
+        self.add_keyframe(lines, &local, pose, pose_cov)
+    }
+
+    /// [`update`](Self::update) with the scan's local region already built
+    /// (`local`, robot frame): what a rebuild from stored keyframes calls.
+    pub fn add_keyframe(
+        &mut self,
+        lines: &[CogLine],
+        local: &LocalRegion,
+        pose: Pose2,
+        pose_cov: [[f64; 3]; 3],
+    ) -> Result<ClsUpdateStats, ClsError> {
+        check_pose(&pose, &pose_cov)?;
+        self.add_region(&local.transformed(&pose), lines, pose, pose_cov)
     }
 
     /// The update after the local map is built: `local` is in the map

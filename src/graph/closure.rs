@@ -1,0 +1,448 @@
+//! Loop closure: is the newest keyframe a view of a place mapped long ago?
+//!
+//! 1. **Candidates**: earlier keyframes at least `min_travel` of path
+//!    behind, whose pose lies within the drift the path since them allows
+//!    (`search_margin + drift_per_metre × path`, capped). The pose estimate
+//!    is not trusted beyond that radius, and nothing inside it is ruled out.
+//! 2. **Reference**: the walls seen from the candidate and its neighbours
+//!    in the chain, fused into a small segment map (their own poses, which
+//!    agree with each other), never the recent chain's walls, which the
+//!    current scan would match trivially.
+//! 3. **Match**: first local localization from the current estimate with
+//!    gates opened to the search radius (the common case after a first
+//!    closure: little drift left); when that finds nothing, the paper's
+//!    global localization (translation-segment voting) over the reference,
+//!    keeping only hypotheses inside the search region, so a loop is found
+//!    even when the drift exceeds every local gate.
+//! 4. **Verification**: a final local localization from the match, then
+//!    enough matched wall length, a constrained pose (no corridor
+//!    direction left free), no distinct runner-up, and no wall of either
+//!    view standing inside the other's free space (the CLS regions).
+//!
+//! Only a verified match becomes a graph edge.
+
+use crate::geometry::{CogLine, Pose2, wrap_angle};
+use crate::localize::global::{GlobalConfig, GlobalMap, global_localize};
+use crate::localize::{LocalizerConfig, localize};
+use crate::map::cls::LocalRegion;
+use crate::map::{Keyframe, SegmentMap, SegmentMapConfig};
+use nalgebra::{Matrix2, Matrix3};
+use serde::{Deserialize, Serialize};
+
+use super::{Edge, EdgeKind, OptimizerConfig};
+
+/// Tuning of loop closure; SI units.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LoopClosureConfig {
+    /// Search for loops at all. Default true.
+    pub enabled: bool,
+    /// Candidates lie at least this much path behind the new keyframe (m).
+    /// Default 8: nearer views are the recent chain, which local
+    /// localization already ties together.
+    pub min_travel: f64,
+    /// Search radius at zero path (m). Default 1.
+    pub search_margin: f64,
+    /// Growth of the search radius with the path since the candidate
+    /// (m/m). Default 0.05: odometry with scan matching drifts 1–3 % of
+    /// the distance; twice that leaves room for heading errors.
+    pub drift_per_metre: f64,
+    /// Cap on the search radius (m). Default 8: a candidate farther than
+    /// the LMS200's mm-mode reach shares too little with the scan.
+    pub max_search_radius: f64,
+    /// Heading error allowed at zero path (rad). Default 0.2.
+    pub heading_margin: f64,
+    /// Growth of the allowed heading error with the path (rad/m). Default
+    /// 0.01.
+    pub heading_drift_per_metre: f64,
+    /// Candidate places tried per keyframe, nearest first. Default 2.
+    pub max_candidates: usize,
+    /// Keyframes on each side of a candidate whose walls form its
+    /// reference. Default 4 (about ±2 m of path).
+    pub reference_keyframes: usize,
+    /// Fewest local lines matched to the reference. Default 4.
+    pub min_matches: usize,
+    /// Least wall length matched to the reference (m, the current scan's
+    /// line lengths). Default 4.
+    pub min_matched_length: f64,
+    /// Most wall length of one view allowed inside the other's free space
+    /// (m). Default 0.5.
+    pub max_free_space_conflict: f64,
+    /// A wall point counts as inside free space when it lies farther than
+    /// this inside the region (m). Default 0.15.
+    pub free_space_tolerance: f64,
+    /// A runner-up hypothesis scoring at least this fraction of the best,
+    /// away from it, makes the match ambiguous (refused). Default 0.85.
+    pub ambiguity_ratio: f64,
+    /// The voting search runs at most every this many keyframes (it costs
+    /// about a millisecond, local matching tens of microseconds). Default 2.
+    pub vote_every: usize,
+    /// Floors on a loop edge's σ: translation (m) and heading (rad).
+    /// Defaults 0.03 and 0.01, above the localizer's own covariance, which
+    /// ignores that the reference walls carry their keyframes' errors.
+    pub loop_sigma_xy: f64,
+    pub loop_sigma_theta: f64,
+    /// Chain edge σ between consecutive keyframes: a floor plus a part per
+    /// metre travelled and per radian turned (m, m/m; rad, rad/m,
+    /// rad/rad). Defaults 0.01 + 0.02/m; 0.002 + 0.005/m + 0.02/rad:
+    /// scan matching against the local map is good to a few millimetres
+    /// per keyframe, and the graph must still be free to bend.
+    pub chain_sigma_xy: f64,
+    pub chain_sigma_xy_per_metre: f64,
+    pub chain_sigma_theta: f64,
+    pub chain_sigma_theta_per_metre: f64,
+    pub chain_sigma_theta_per_radian: f64,
+    /// Optimise when a new loop edge's χ² at the current poses exceeds
+    /// this (else the graph already agrees with it and is left as it is).
+    /// Default 1.
+    pub optimize_above_chi2: f64,
+    pub optimizer: OptimizerConfig,
+}
+
+impl Default for LoopClosureConfig {
+    fn default() -> Self {
+        LoopClosureConfig {
+            enabled: true,
+            min_travel: 8.0,
+            search_margin: 1.0,
+            drift_per_metre: 0.05,
+            max_search_radius: 8.0,
+            heading_margin: 0.2,
+            heading_drift_per_metre: 0.01,
+            max_candidates: 2,
+            reference_keyframes: 4,
+            min_matches: 4,
+            min_matched_length: 4.0,
+            max_free_space_conflict: 0.5,
+            free_space_tolerance: 0.15,
+            ambiguity_ratio: 0.85,
+            vote_every: 2,
+            loop_sigma_xy: 0.03,
+            loop_sigma_theta: 0.01,
+            chain_sigma_xy: 0.01,
+            chain_sigma_xy_per_metre: 0.02,
+            chain_sigma_theta: 0.002,
+            chain_sigma_theta_per_metre: 0.005,
+            chain_sigma_theta_per_radian: 0.02,
+            optimize_above_chi2: 1.0,
+            optimizer: OptimizerConfig::default(),
+        }
+    }
+}
+
+impl LoopClosureConfig {
+    /// Search radius (m) and heading tolerance (rad) after `path` metres.
+    pub fn search_window(&self, path: f64) -> (f64, f64) {
+        let r = (self.search_margin + self.drift_per_metre * path).min(self.max_search_radius);
+        let h =
+            (self.heading_margin + self.heading_drift_per_metre * path).min(std::f64::consts::PI);
+        (r, h)
+    }
+
+    /// Information of a chain edge for the motion `delta` (frame of the
+    /// earlier keyframe).
+    pub fn chain_information(&self, delta: &Pose2) -> Matrix3<f64> {
+        let d = delta.x.hypot(delta.y);
+        let sxy = self.chain_sigma_xy + self.chain_sigma_xy_per_metre * d;
+        let st = self.chain_sigma_theta
+            + self.chain_sigma_theta_per_metre * d
+            + self.chain_sigma_theta_per_radian * delta.theta.abs();
+        super::diagonal_information(sxy, st)
+    }
+}
+
+/// Why the newest keyframe closed no loop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+pub enum LoopRejection {
+    /// No candidate lies inside the search window.
+    NoCandidate,
+    /// Neither local matching nor voting found a pose in the window.
+    NoMatch,
+    /// Too few lines or too little wall length matched.
+    TooLittleOverlap,
+    /// A direction left unconstrained (a corridor), or a distinct
+    /// runner-up hypothesis.
+    Ambiguous,
+    /// A wall of one view stands in the other's free space.
+    FreeSpaceConflict,
+}
+
+/// A verified loop: the newest keyframe's pose as the reference sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoopMatch {
+    /// The candidate keyframe the edge starts from.
+    pub keyframe: usize,
+    /// Newest keyframe's pose in the map frame, by the reference.
+    pub pose: Pose2,
+    pub covariance: [[f64; 3]; 3],
+    /// Local lines matched and their length (m).
+    pub matches: usize,
+    pub matched_length: f64,
+    /// Whether the voting search found it (else local matching did).
+    pub by_voting: bool,
+}
+
+impl LoopMatch {
+    /// The graph edge: the newest keyframe (`to`) in the frame of the
+    /// candidate at `candidate_pose`, with σ floors from `cfg`.
+    pub fn edge(&self, to: usize, candidate_pose: &Pose2, cfg: &LoopClosureConfig) -> Edge {
+        let measurement = candidate_pose.between(&self.pose);
+        let c = &self.covariance;
+        let (s, co) = candidate_pose.theta.sin_cos();
+        let r = Matrix2::new(co, -s, s, co);
+        let xy = r.transpose() * Matrix2::new(c[0][0], c[0][1], c[1][0], c[1][1]) * r;
+        let fxy = cfg.loop_sigma_xy * cfg.loop_sigma_xy;
+        let ft = cfg.loop_sigma_theta * cfg.loop_sigma_theta;
+        let cov = Matrix3::new(
+            xy[(0, 0)] + fxy,
+            xy[(0, 1)],
+            0.0,
+            xy[(1, 0)],
+            xy[(1, 1)] + fxy,
+            0.0,
+            0.0,
+            0.0,
+            c[2][2].max(0.0) + ft,
+        );
+        let information = cov.try_inverse().unwrap_or_else(|| {
+            super::diagonal_information(cfg.loop_sigma_xy, cfg.loop_sigma_theta)
+        });
+        Edge {
+            from: self.keyframe,
+            to,
+            measurement,
+            information,
+            kind: EdgeKind::Loop,
+        }
+    }
+}
+
+/// Everything the search needs to know of the keyframes.
+#[derive(Debug, Clone, Copy)]
+pub struct LoopQuery<'a> {
+    pub keyframes: &'a [Keyframe],
+    /// Current estimate of each keyframe's pose (map frame).
+    pub poses: &'a [Pose2],
+    /// The keyframe to close a loop for (usually the newest).
+    pub current: usize,
+    /// Whether the voting search may run for this keyframe.
+    pub allow_voting: bool,
+}
+
+/// Earlier keyframes inside the search window of `current`, nearest
+/// first, at most one per `2 × reference_keyframes + 1` stretch of chain
+/// (neighbours share one reference).
+pub fn loop_candidates(q: &LoopQuery<'_>, cfg: &LoopClosureConfig) -> Vec<(usize, f64, f64)> {
+    let Some(cur) = q.poses.get(q.current) else {
+        return Vec::new();
+    };
+    let Some(cur_kf) = q.keyframes.get(q.current) else {
+        return Vec::new();
+    };
+    let mut found: Vec<(usize, f64, f64)> = Vec::new();
+    for (j, (kf, pose)) in q.keyframes.iter().zip(q.poses).enumerate().take(q.current) {
+        let path = cur_kf.travelled - kf.travelled;
+        if path < cfg.min_travel {
+            continue;
+        }
+        let (radius, heading) = cfg.search_window(path);
+        let d = (pose.x - cur.x).hypot(pose.y - cur.y);
+        // The heading matters only as far as the views must overlap: a
+        // 180° scan seen from the opposite direction shares little.
+        if d <= radius && wrap_angle(pose.theta - cur.theta).abs() <= heading + 1.0 {
+            found.push((j, d, path));
+        }
+    }
+    found.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+    let spread = 2 * cfg.reference_keyframes + 1;
+    let mut chosen: Vec<(usize, f64, f64)> = Vec::new();
+    for c in found {
+        if chosen.len() >= cfg.max_candidates {
+            break;
+        }
+        if chosen.iter().all(|k| k.0.abs_diff(c.0) >= spread) {
+            chosen.push(c);
+        }
+    }
+    chosen
+}
+
+/// The walls seen from keyframe `centre` and its chain neighbours that lie
+/// at least `min_travel` behind `current`, fused with their own poses.
+fn reference_map(
+    q: &LoopQuery<'_>,
+    centre: usize,
+    fusion: &SegmentMapConfig,
+    cfg: &LoopClosureConfig,
+) -> SegmentMap {
+    let mut map = SegmentMap::new(*fusion);
+    let lo = centre.saturating_sub(cfg.reference_keyframes);
+    let hi = (centre + cfg.reference_keyframes).min(q.current.saturating_sub(1));
+    let limit = q.keyframes[q.current].travelled - cfg.min_travel;
+    for j in lo..=hi {
+        let kf = &q.keyframes[j];
+        if kf.travelled > limit && j != centre {
+            continue;
+        }
+        map.update(&kf.lines, &q.poses[j], &kf.covariance);
+    }
+    map
+}
+
+/// Length (m) of `lines` (map frame) lying inside `region` (map frame) by
+/// more than `tolerance`, sampled every 5 cm.
+fn length_in_free_space(lines: &[CogLine], region: &LocalRegion, tolerance: f64) -> f64 {
+    let mut inside = 0.0;
+    for l in lines {
+        let len = l.length();
+        let n = ((len / 0.05).ceil() as usize).max(1);
+        let step = len / n as f64;
+        for k in 0..n {
+            let f = (k as f64 + 0.5) / n as f64;
+            let p = [
+                l.start[0] + f * (l.end[0] - l.start[0]),
+                l.start[1] + f * (l.end[1] - l.start[1]),
+            ];
+            if region.strictly_contains(p, tolerance) {
+                inside += step;
+            }
+        }
+    }
+    inside
+}
+
+/// Wall length of each view standing in the other's free space (m).
+fn free_space_conflict(
+    current: &Keyframe,
+    pose: &Pose2,
+    reference: &Keyframe,
+    reference_pose: &Pose2,
+    tolerance: f64,
+) -> f64 {
+    let mut total = 0.0;
+    if let Some(region) = &reference.region {
+        let region = region.transformed(reference_pose);
+        let lines: Vec<CogLine> = current.lines.iter().map(|l| l.transformed(pose)).collect();
+        total += length_in_free_space(&lines, &region, tolerance);
+    }
+    if let Some(region) = &current.region {
+        let region = region.transformed(pose);
+        let lines: Vec<CogLine> = reference
+            .lines
+            .iter()
+            .map(|l| l.transformed(reference_pose))
+            .collect();
+        total += length_in_free_space(&lines, &region, tolerance);
+    }
+    total
+}
+
+fn diagonal_cov(sigma_xy: f64, sigma_theta: f64) -> [[f64; 3]; 3] {
+    let (a, b) = (sigma_xy * sigma_xy, sigma_theta * sigma_theta);
+    [[a, 0.0, 0.0], [0.0, a, 0.0], [0.0, 0.0, b]]
+}
+
+/// Tries the candidates of `q.current` in turn; the first verified match,
+/// or why there was none (the most telling reason over the candidates).
+pub fn close_loop(
+    q: &LoopQuery<'_>,
+    fusion: &SegmentMapConfig,
+    localizer: &LocalizerConfig,
+    global: &GlobalConfig,
+    cfg: &LoopClosureConfig,
+) -> Result<LoopMatch, LoopRejection> {
+    let candidates = loop_candidates(q, cfg);
+    if candidates.is_empty() {
+        return Err(LoopRejection::NoCandidate);
+    }
+    let current = &q.keyframes[q.current];
+    let estimate = q.poses[q.current];
+    let mut why = LoopRejection::NoMatch;
+    for (j, _, path) in candidates {
+        let (radius, heading) = cfg.search_window(path);
+        let reference = reference_map(q, j, fusion, cfg);
+        if reference.is_empty() {
+            continue;
+        }
+        let in_window = |p: &Pose2| {
+            (p.x - estimate.x).hypot(p.y - estimate.y) <= radius
+                && wrap_angle(p.theta - estimate.theta).abs() <= heading
+        };
+        // Local matching from the estimate, gates opened to the window
+        // (as far as the localizer's jump limits allow).
+        let wide = LocalizerConfig {
+            max_translation_jump: radius.max(localizer.max_translation_jump),
+            max_rotation_jump: heading.max(localizer.max_rotation_jump),
+            ..*localizer
+        };
+        let prior = diagonal_cov((radius / 3.0).min(0.5), (heading / 3.0).min(0.15));
+        let mut start = localize(&current.lines, reference.index(), estimate, &prior, &wide)
+            .ok()
+            .map(|r| (r.pose, false))
+            .filter(|(p, _)| in_window(p));
+        let mut runner_up = None;
+        if start.is_none() && q.allow_voting {
+            let voters = GlobalMap::new(reference.index().iter().map(|(_, l)| *l));
+            if let Ok(result) = global_localize(&current.lines, &voters, global) {
+                let mut inside = result.hypotheses.iter().filter(|h| in_window(&h.pose));
+                if let Some(best) = inside.next() {
+                    start = Some((best.pose, true));
+                    runner_up = inside
+                        .find(|h| {
+                            (h.pose.x - best.pose.x).hypot(h.pose.y - best.pose.y)
+                                > global.cluster_distance
+                                || wrap_angle(h.pose.theta - best.pose.theta).abs()
+                                    > global.cluster_angle
+                        })
+                        .map(|h| h.score / best.score.max(1e-9));
+                }
+            }
+        }
+        let Some((pose, by_voting)) = start else {
+            continue;
+        };
+        if runner_up.is_some_and(|ratio| ratio >= cfg.ambiguity_ratio) {
+            why = why.max(LoopRejection::Ambiguous);
+            continue;
+        }
+        // Verification from the match, with the localizer's own gates.
+        let tight = diagonal_cov(0.05, 0.02);
+        let Ok(fix) = localize(&current.lines, reference.index(), pose, &tight, localizer) else {
+            continue;
+        };
+        let matched_length: f64 = fix
+            .matches
+            .iter()
+            .filter_map(|(i, _)| current.lines.get(*i))
+            .map(CogLine::length)
+            .sum();
+        if fix.matches.len() < cfg.min_matches || matched_length < cfg.min_matched_length {
+            why = why.max(LoopRejection::TooLittleOverlap);
+            continue;
+        }
+        if fix.degenerate.is_some() {
+            why = why.max(LoopRejection::Ambiguous);
+            continue;
+        }
+        let conflict = free_space_conflict(
+            current,
+            &fix.pose,
+            &q.keyframes[j],
+            &q.poses[j],
+            cfg.free_space_tolerance,
+        );
+        if conflict > cfg.max_free_space_conflict {
+            why = why.max(LoopRejection::FreeSpaceConflict);
+            continue;
+        }
+        return Ok(LoopMatch {
+            keyframe: j,
+            pose: fix.pose,
+            covariance: fix.covariance,
+            matches: fix.matches.len(),
+            matched_length,
+            by_voting,
+        });
+    }
+    Err(why)
+}

@@ -1,0 +1,228 @@
+//! The keyframes and their pose graph: the source of truth of a map. The
+//! walls (segment map) and the CLS region are functions of them, rebuilt in
+//! keyframe order whenever a loop closure moves the poses.
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+use tracing::{debug, trace_span};
+
+use super::{
+    EdgeKind, GraphError, LoopClosureConfig, LoopQuery, LoopRejection, OptimizeReport, PoseGraph,
+    close_loop,
+};
+use crate::geometry::Pose2;
+use crate::localize::LocalizerConfig;
+use crate::localize::global::GlobalConfig;
+use crate::map::cls::{ClsMap, ClsMapConfig};
+use crate::map::{Keyframe, SegmentMap, SegmentMapConfig};
+
+/// Loop-closure counters of a run.
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+pub struct LoopStats {
+    /// Keyframes that had at least one candidate in their search window.
+    pub searched: usize,
+    /// Verified loops added to the graph.
+    pub accepted: usize,
+    /// Of those, found by the voting search (the others by local matching).
+    pub by_voting: usize,
+    /// Searches that found no verified loop, by reason.
+    pub rejected: BTreeMap<String, usize>,
+    /// Optimisations run, and loop edges the optimiser's kernel
+    /// down-weighted in the last one.
+    pub optimisations: usize,
+    pub down_weighted: usize,
+    /// Time in loop search, optimisation and rebuilds (s).
+    pub search_s: f64,
+    pub optimise_s: f64,
+    pub rebuild_s: f64,
+}
+
+/// What closing a loop did to the newest keyframe.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Correction {
+    /// Map-frame correction of the newest keyframe: `new = correction ∘ old`.
+    pub correction: Pose2,
+    pub report: OptimizeReport,
+}
+
+/// Keyframes, the pose graph over them, and the counters.
+#[derive(Debug, Clone, Default)]
+pub struct KeyframeGraph {
+    keyframes: Vec<Keyframe>,
+    graph: PoseGraph,
+    stats: LoopStats,
+}
+
+impl KeyframeGraph {
+    pub fn new() -> Self {
+        KeyframeGraph::default()
+    }
+
+    pub fn keyframes(&self) -> &[Keyframe] {
+        &self.keyframes
+    }
+
+    pub fn graph(&self) -> &PoseGraph {
+        &self.graph
+    }
+
+    pub fn poses(&self) -> &[Pose2] {
+        self.graph.poses()
+    }
+
+    pub fn len(&self) -> usize {
+        self.keyframes.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.keyframes.is_empty()
+    }
+
+    pub fn stats(&self) -> &LoopStats {
+        &self.stats
+    }
+
+    /// Adds `keyframe` at `pose` with a chain edge from the previous one
+    /// (measured by the two poses; σ from `cfg`, tripled when the pose was
+    /// not localized but predicted from odometry); its `travelled` is set
+    /// here. Returns its index.
+    pub fn add(
+        &mut self,
+        mut keyframe: Keyframe,
+        pose: Pose2,
+        localized: bool,
+        cfg: &LoopClosureConfig,
+    ) -> usize {
+        let previous = self.graph.poses().last().copied();
+        keyframe.travelled = match (previous, self.keyframes.last()) {
+            (Some(p), Some(k)) => k.travelled + (pose.x - p.x).hypot(pose.y - p.y),
+            _ => 0.0,
+        };
+        let index = self.graph.add_pose(pose);
+        if let Some(p) = previous {
+            let delta = p.between(&pose);
+            let mut information = cfg.chain_information(&delta);
+            if !localized {
+                information /= 9.0;
+            }
+            let edge = super::Edge {
+                from: index - 1,
+                to: index,
+                measurement: delta,
+                information,
+                kind: EdgeKind::Chain,
+            };
+            if let Err(e) = self.graph.add_edge(edge) {
+                // Not finite: the keyframe stays, held by no edge but its
+                // pose (the optimiser keeps it where it is).
+                debug!("chain edge refused: {e}");
+            }
+        }
+        self.keyframes.push(keyframe);
+        index
+    }
+
+    /// Looks for a loop from the newest keyframe; adds a verified one to
+    /// the graph and optimises when the graph disagrees with it. Returns
+    /// the correction of the newest keyframe when the poses moved.
+    pub fn close_loop(
+        &mut self,
+        fusion: &SegmentMapConfig,
+        localizer: &LocalizerConfig,
+        global: &GlobalConfig,
+        cfg: &LoopClosureConfig,
+    ) -> Result<Option<Correction>, GraphError> {
+        let Some(current) = self.keyframes.len().checked_sub(1) else {
+            return Ok(None);
+        };
+        if !cfg.enabled || current == 0 {
+            return Ok(None);
+        }
+        let started = Instant::now();
+        let query = LoopQuery {
+            keyframes: &self.keyframes,
+            poses: self.graph.poses(),
+            current,
+            allow_voting: current % cfg.vote_every.max(1) == 0,
+        };
+        let found = trace_span!("loop_search")
+            .in_scope(|| close_loop(&query, fusion, localizer, global, cfg));
+        self.stats.search_s += started.elapsed().as_secs_f64();
+        let m = match found {
+            Ok(m) => m,
+            Err(LoopRejection::NoCandidate) => return Ok(None),
+            Err(why) => {
+                self.stats.searched += 1;
+                *self.stats.rejected.entry(format!("{why:?}")).or_default() += 1;
+                return Ok(None);
+            }
+        };
+        self.stats.searched += 1;
+        self.stats.accepted += 1;
+        self.stats.by_voting += usize::from(m.by_voting);
+        let poses = self.graph.poses();
+        let edge = m.edge(current, &poses[m.keyframe], cfg);
+        let residual = super::edge_error(&edge, &poses[m.keyframe], &poses[current]);
+        let chi2 = residual.dot(&(edge.information * residual));
+        self.graph.add_edge(edge)?;
+        debug!(
+            keyframe = current,
+            with = m.keyframe,
+            chi2,
+            voting = m.by_voting,
+            "loop closed"
+        );
+        if chi2 <= cfg.optimize_above_chi2 {
+            return Ok(None);
+        }
+        let before = self.graph.poses()[current];
+        let started = Instant::now();
+        let report = trace_span!("optimise").in_scope(|| self.graph.optimize(&cfg.optimizer))?;
+        self.stats.optimise_s += started.elapsed().as_secs_f64();
+        self.stats.optimisations += 1;
+        self.stats.down_weighted = report.loops_down_weighted;
+        let after = self.graph.poses()[current];
+        Ok(Some(Correction {
+            correction: after.compose(&before.inverse()),
+            report,
+        }))
+    }
+
+    /// The walls of every keyframe fused in keyframe order at the current
+    /// poses: what the incremental updates built, for the same poses.
+    pub fn rebuild_walls(&mut self, config: SegmentMapConfig) -> SegmentMap {
+        let started = Instant::now();
+        let mut map = SegmentMap::new(config);
+        for (kf, pose) in self.keyframes.iter().zip(self.graph.poses()) {
+            map.update(&kf.lines, pose, &kf.covariance);
+        }
+        self.stats.rebuild_s += started.elapsed().as_secs_f64();
+        map
+    }
+
+    /// The CLS map of every keyframe in keyframe order at the current
+    /// poses, and how many keyframes it refused.
+    pub fn rebuild_cls(&mut self, config: ClsMapConfig) -> (ClsMap, usize) {
+        let started = Instant::now();
+        let mut cls = ClsMap::new(config);
+        let mut refused = 0;
+        for (kf, pose) in self.keyframes.iter().zip(self.graph.poses()) {
+            let grown = match &kf.region {
+                Some(region) => cls
+                    .add_keyframe(&kf.lines, region, *pose, kf.covariance)
+                    .is_ok(),
+                None => false,
+            };
+            refused += usize::from(!grown);
+        }
+        self.stats.rebuild_s += started.elapsed().as_secs_f64();
+        (cls, refused)
+    }
+
+    /// Time spent in loop closure so far.
+    pub fn time(&self) -> Duration {
+        Duration::from_secs_f64(self.stats.search_s + self.stats.optimise_s + self.stats.rebuild_s)
+    }
+}
