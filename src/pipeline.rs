@@ -305,6 +305,18 @@ impl OfflineMapper {
         self.defer_cls_rebuild = true;
     }
 
+    /// The end of a run: optimises the pose graph once more if loops came
+    /// in since its last optimisation, then brings the trajectory and both
+    /// maps up to date with the keyframes.
+    pub fn finish(&mut self) {
+        match self.graph.settle(&self.config.loop_closure) {
+            Ok(Some(c)) => self.apply_correction(&c),
+            Ok(None) => {}
+            Err(e) => warn!("pose graph not optimised at the end: {e}"),
+        }
+        self.refresh_cls_map();
+    }
+
     /// Rebuilds the CLS map from the keyframes if a loop closure moved
     /// them since it was grown.
     pub fn refresh_cls_map(&mut self) {
@@ -437,16 +449,15 @@ impl OfflineMapper {
         }
     }
 
-    /// A loop closure moved the keyframes: the current pose, the
-    /// predictor, the keyframe policy and the trajectory follow them, and
+    /// A loop closure moved the keyframes: the predictor, the keyframe
+    /// policy and the trajectory follow them, and
     /// the maps are rebuilt from the keyframes at their new poses.
-    fn apply_correction(&mut self, c: &Correction, outcome: &mut ScanOutcome) {
+    fn apply_correction(&mut self, c: &Correction) {
         let poses = self.graph.poses();
-        if let Some(newest) = poses.last() {
-            outcome.pose = *newest;
-        }
         self.predictor.reframe(&c.correction);
-        self.keyframes.reframe(outcome.pose);
+        if let Some(newest) = poses.last() {
+            self.keyframes.reframe(*newest);
+        }
         for ((_, pose), anchor) in self.trajectory.iter_mut().zip(&self.anchors) {
             if let Some((k, relative)) = anchor {
                 *pose = poses[*k].compose(relative);
@@ -600,7 +611,11 @@ impl OfflineMapper {
                 &self.config.loop_closure,
             );
             match closed {
-                Ok(Some(correction)) => self.apply_correction(&correction, &mut outcome),
+                Ok(Some(correction)) => {
+                    self.apply_correction(&correction);
+                    // This scan is the newest keyframe.
+                    outcome.pose = correction.correction.compose(&outcome.pose);
+                }
                 Ok(None) => {}
                 Err(e) => warn!(t = record.scan.t, "pose graph not optimised: {e}"),
             }
@@ -714,7 +729,7 @@ pub fn run_offline_mapping(
     if mapper.trajectory().is_empty() {
         return Err(PipelineError::NoScans);
     }
-    mapper.refresh_cls_map();
+    mapper.finish();
     let mut summary = mapper.summary();
     summary.input_broken = input_broken;
     if summary.rejected_localizations > 0 {

@@ -53,6 +53,9 @@ pub struct KeyframeGraph {
     keyframes: Vec<Keyframe>,
     graph: PoseGraph,
     stats: LoopStats,
+    /// Loop edges added since the last optimisation (each agreed with the
+    /// graph when it came, but together they may pull a little).
+    unoptimised_loops: usize,
 }
 
 impl KeyframeGraph {
@@ -174,20 +177,37 @@ impl KeyframeGraph {
             voting = m.by_voting,
             "loop closed"
         );
+        self.unoptimised_loops += 1;
         if chi2 <= cfg.optimize_above_chi2 {
             return Ok(None);
         }
+        self.optimise(cfg).map(Some)
+    }
+
+    /// Optimises once more if loop edges came in since the last
+    /// optimisation (the end of a run); the correction of the newest
+    /// keyframe when the poses moved.
+    pub fn settle(&mut self, cfg: &LoopClosureConfig) -> Result<Option<Correction>, GraphError> {
+        if self.unoptimised_loops == 0 {
+            return Ok(None);
+        }
+        self.optimise(cfg).map(Some)
+    }
+
+    fn optimise(&mut self, cfg: &LoopClosureConfig) -> Result<Correction, GraphError> {
+        let current = self.graph.poses().len().saturating_sub(1);
         let before = self.graph.poses()[current];
         let started = Instant::now();
         let report = trace_span!("optimise").in_scope(|| self.graph.optimize(&cfg.optimizer))?;
         self.stats.optimise_s += started.elapsed().as_secs_f64();
         self.stats.optimisations += 1;
         self.stats.down_weighted = report.loops_down_weighted;
+        self.unoptimised_loops = 0;
         let after = self.graph.poses()[current];
-        Ok(Some(Correction {
+        Ok(Correction {
             correction: after.compose(&before.inverse()),
             report,
-        }))
+        })
     }
 
     /// The walls of every keyframe fused in keyframe order at the current

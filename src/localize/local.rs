@@ -316,7 +316,13 @@ pub fn localize(
 
     let dx = (pose.x - predicted.x).hypot(pose.y - predicted.y);
     let dtheta = wrap_angle(pose.theta - predicted.theta).abs();
-    if dx > cfg.max_translation_jump || dtheta > cfg.max_rotation_jump {
+    // A prediction that is itself this uncertain (a long, fast turn between
+    // sparse scans) may be corrected by as many of its σ as the gates let
+    // matches through.
+    let rotation_limit = cfg
+        .max_rotation_jump
+        .max(cfg.gate_sigmas * prior[2][2].max(0.0).sqrt());
+    if dx > cfg.max_translation_jump || dtheta > rotation_limit {
         return Err(LocalizeError::ImplausibleJump { dx, dtheta });
     }
     Ok(LocalizationResult {
