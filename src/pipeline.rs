@@ -298,11 +298,14 @@ impl OfflineMapper {
         &self.graph
     }
 
-    /// After a loop closure, rebuild the CLS map only when
-    /// [`refresh_cls_map`](Self::refresh_cls_map) asks (an offline run needs
-    /// it once, at the end); meanwhile keyframes do not grow it.
+    /// Grow the CLS map only when [`refresh_cls_map`](Self::refresh_cls_map)
+    /// asks (an offline run needs it once, at the end), from the keyframes
+    /// at their final poses; meanwhile keyframes do not grow it.
     pub fn defer_cls_rebuild(&mut self) {
         self.defer_cls_rebuild = true;
+        // Built once from the keyframes at the end, since it is the same
+        // map the incremental updates would give for the same poses.
+        self.cls_stale = true;
     }
 
     /// The end of a run: optimises the pose graph once more if loops came
