@@ -71,8 +71,10 @@ pub struct LocalizerConfig {
     /// Reject a solution farther than this from the prediction (m).
     /// Default 0.5: odometry between two scans drifts far less.
     pub max_translation_jump: f64,
-    /// Reject a solution turned more than this from the prediction (rad).
-    /// Default 0.35 (20°).
+    /// Reject a solution turned more than this from the prediction (rad),
+    /// or than `gate_sigmas` of the prediction's own heading σ when that is
+    /// wider (fast turns between sparse scans, where odometry headings lag
+    /// by more). Default 0.35 (20°).
     pub max_rotation_jump: f64,
     /// Floor on a line's σc (m) before weighting. Default 0.001: the
     /// LMS200's 1 mm resolution.
