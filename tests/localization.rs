@@ -85,6 +85,10 @@ fn extraction_config(sigma: f64) -> ExtractionConfig {
         split_threshold: (4.0 * sigma).max(0.04),
         merge_threshold: (4.0 * sigma).max(0.04),
         range_noise: RangeNoise { a: sigma, b: 0.0 },
+        // An 8 m horizon, inside the simulated LMS200's mm-mode reach, so
+        // the corridor cases see no door jamb or end wall 8.0–8.18 m away
+        // (their premise: nothing constrains the along-corridor direction).
+        max_range: 8.0,
         ..ExtractionConfig::default()
     }
 }

@@ -80,8 +80,14 @@ pub struct ExtractionConfig {
     /// Readings shorter than this are dropped (m). Default 0.05: the LMS200
     /// reports dazzle and near-field faults as tiny ranges.
     pub min_range: f64,
-    /// Readings longer than this are dropped (m). Default 8.0: the LMS200's
-    /// mm mode tops out at 8.183 m and readings near the limit are weak.
+    /// Readings longer than this are dropped (m), on top of what the input
+    /// already reports as no return: the sensor's reach in its unit mode
+    /// (8.183 m in mm mode, 81.83 m in cm mode; the special codes above
+    /// them), a log's declared maximum, CARMEN's 81.9 m code. Default
+    /// 81.83, the LMS200's largest range, so the data sets the reach: long
+    /// beams carry the geometry of halls and long corridors (on CSAIL thinned
+    /// to scans 0.5 m apart, 8 m here gave 0.33 m of relation error where
+    /// the log's own reach gives 0.09 m).
     pub max_range: f64,
     /// Range noise model used to propagate σθ and σc.
     pub range_noise: RangeNoise,
@@ -106,7 +112,7 @@ impl Default for ExtractionConfig {
             min_length: 0.2,
             max_point_gap: 0.3,
             min_range: 0.05,
-            max_range: 8.0,
+            max_range: 81.83,
             range_noise: RangeNoise::default(),
             end_trim_sigmas: 3.0,
             end_trim_floor: 0.001,
