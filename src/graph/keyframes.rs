@@ -157,6 +157,7 @@ impl KeyframeGraph {
             Ok(m) => m,
             Err(LoopRejection::NoCandidate) => return Ok(None),
             Err(why) => {
+                debug!(keyframe = current, "no loop: {why:?}");
                 self.stats.searched += 1;
                 *self.stats.rejected.entry(format!("{why:?}")).or_default() += 1;
                 return Ok(None);
