@@ -11,28 +11,6 @@ use clsmap::mapping_config::MapperConfig;
 use clsmap::pipeline::OfflineMapper;
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
 
-/// A 2 m wide corridor around a 20 m × 14 m block (a 68 m loop), with
-/// pillars and recesses so that places along a side differ.
-fn long_loop() -> World {
-    let mut w = World::new();
-    w.add_polyline(&[[0.0, 0.0], [24.0, 0.0], [24.0, 18.0], [0.0, 18.0]], true);
-    w.add_polyline(&[[2.0, 2.0], [2.0, 16.0], [22.0, 16.0], [22.0, 2.0]], true);
-    // Features on the outer walls: boxes standing against them.
-    for (c, h) in [
-        ([6.0, 0.25], [0.4, 0.25]),
-        ([15.0, 0.2], [0.8, 0.2]),
-        ([23.75, 7.0], [0.25, 0.6]),
-        ([23.8, 13.0], [0.2, 0.3]),
-        ([18.0, 17.75], [0.5, 0.25]),
-        ([9.0, 17.8], [1.0, 0.2]),
-        ([0.25, 12.0], [0.25, 0.4]),
-        ([0.2, 5.0], [0.2, 0.7]),
-    ] {
-        w.add_box(c, h, 0.0);
-    }
-    w
-}
-
 /// Poses every `step` m along the corridor centre line, turning in place
 /// at the corners, `laps` times round.
 fn tour(corners: &[[f64; 2]], laps: usize, step: f64) -> Vec<Pose2> {
@@ -126,7 +104,7 @@ const CORNERS: [[f64; 2]; 5] = [
 /// set for this world is 5 cm; this test holds the 6 cm reached).
 #[test]
 fn a_long_loop_driven_twice_on_drifting_odometry_closes() {
-    let world = long_loop();
+    let world = World::long_loop();
     let truth = tour(&CORNERS, 2, 0.2);
     let mut rng = Rng::new(11);
     let odo = drifting_odometry(&truth, 1.02, 0.01, &mut rng);

@@ -326,14 +326,17 @@ impl PoseGraph {
         let mut lambda = 1e-6;
         let mut cost = self.cost(&self.poses, phi);
         let mut iterations = 0;
+        let mut order = None;
         while iterations < max_iterations {
             iterations += 1;
             let (h, g) = self.normal_equations(phi);
+            // The pattern stays while the edges do: one ordering per stage.
+            let order = order.get_or_insert_with(|| elimination_order(&h, n - 1));
             // Retry with more damping until a step lowers the robust cost
             // (or the damping says there is none).
             let mut accepted = None;
             while lambda < 1e8 {
-                let step = solve_damped(&h, &g, n - 1, lambda)?;
+                let step = solve_damped(&h, &g, order, lambda)?;
                 let mut trial = self.poses.clone();
                 for (i, p) in trial.iter_mut().enumerate().skip(1) {
                     let k = 3 * (i - 1);
@@ -398,7 +401,13 @@ impl PoseGraph {
 
 /// Solves `(H + λ·diag(H) + λ·I) δ = −g` for the pose steps, `H` given by
 /// its lower-triangle 3×3 blocks over `m` poses.
-fn solve_damped(h: &Blocks, g: &[f64], m: usize, lambda: f64) -> Result<Vec<f64>, GraphError> {
+fn solve_damped(
+    h: &Blocks,
+    g: &[f64],
+    order: &[usize],
+    lambda: f64,
+) -> Result<Vec<f64>, GraphError> {
+    let m = order.len();
     let dim = 3 * m;
     let mut coo = CooMatrix::new(dim, dim);
     for (&(i, j), block) in h {
@@ -411,9 +420,10 @@ fn solve_damped(h: &Blocks, g: &[f64], m: usize, lambda: f64) -> Result<Vec<f64>
                 if i == j && c > r {
                     continue;
                 }
-                coo.push(3 * i + r, 3 * j + c, v);
+                let (pi, pj) = (order[i], order[j]);
+                coo.push(3 * pi + r, 3 * pj + c, v);
                 if i != j || r != c {
-                    coo.push(3 * j + c, 3 * i + r, v);
+                    coo.push(3 * pj + c, 3 * pi + r, v);
                 }
             }
         }
@@ -428,17 +438,79 @@ fn solve_damped(h: &Blocks, g: &[f64], m: usize, lambda: f64) -> Result<Vec<f64>
     }
     for (i, _) in present.iter().enumerate().filter(|(_, p)| !**p) {
         for r in 0..3 {
-            coo.push(3 * i + r, 3 * i + r, 1.0);
+            coo.push(3 * order[i] + r, 3 * order[i] + r, 1.0);
         }
     }
     let csc = CscMatrix::from(&coo);
     let chol = CscCholesky::factor(&csc).map_err(|_| GraphError::NotPositiveDefinite)?;
-    let rhs = DMatrix::from_iterator(dim, 1, g.iter().map(|v| -v));
+    let mut rhs = DMatrix::zeros(dim, 1);
+    for (i, &pi) in order.iter().enumerate() {
+        for k in 0..3 {
+            rhs[3 * pi + k] = -g[3 * i + k];
+        }
+    }
     let x = chol.solve(&rhs);
     if !x.iter().all(|v| v.is_finite()) {
         return Err(GraphError::NotPositiveDefinite);
     }
-    Ok(x.iter().copied().collect())
+    let mut step = vec![0.0; dim];
+    for (i, &pi) in order.iter().enumerate() {
+        for k in 0..3 {
+            step[3 * i + k] = x[3 * pi + k];
+        }
+    }
+    Ok(step)
+}
+
+/// Position of each of the `m` poses in the elimination order: reverse
+/// Cuthill–McKee over the graph of blocks, started from a pose of least
+/// degree. Keyframe order is a good order for one pass round a loop, but
+/// a map driven round several times links each place to all its visits;
+/// numbered in breadth-first layers those visits sit next to each other,
+/// so the factor's profile, and with it the fill, stays narrow.
+fn elimination_order(h: &Blocks, m: usize) -> Vec<usize> {
+    let mut neighbours: Vec<Vec<usize>> = vec![Vec::new(); m];
+    for &(i, j) in h.keys() {
+        if i != j && i < m && j < m {
+            neighbours[i].push(j);
+            neighbours[j].push(i);
+        }
+    }
+    for list in &mut neighbours {
+        list.sort_unstable();
+        list.dedup();
+    }
+    let degree = |v: usize| neighbours[v].len();
+    let mut by_degree: Vec<usize> = (0..m).collect();
+    by_degree.sort_by_key(|&v| (degree(v), v));
+    let mut visited = vec![false; m];
+    let mut sequence = Vec::with_capacity(m);
+    let mut queue = std::collections::VecDeque::new();
+    for &start in &by_degree {
+        if visited[start] {
+            continue;
+        }
+        visited[start] = true;
+        queue.push_back(start);
+        while let Some(v) = queue.pop_front() {
+            sequence.push(v);
+            let mut next: Vec<usize> = neighbours[v]
+                .iter()
+                .copied()
+                .filter(|&u| !visited[u])
+                .collect();
+            next.sort_by_key(|&u| (degree(u), u));
+            for u in next {
+                visited[u] = true;
+                queue.push_back(u);
+            }
+        }
+    }
+    let mut position = vec![0; m];
+    for (k, &v) in sequence.iter().rev().enumerate() {
+        position[v] = k;
+    }
+    position
 }
 
 /// Information matrix of a relative-pose measurement with isotropic

@@ -177,6 +177,29 @@ impl World {
         w
     }
 
+    /// A 2 m wide corridor round a 20 m × 14 m block (a 68 m loop along
+    /// its centre line, corners at (1, 1) and (23, 17)), with boxes against
+    /// the outer walls so that places along a side differ: the loop-closure
+    /// world, long enough for odometry drift to exceed every local gate.
+    pub fn long_loop() -> World {
+        let mut w = World::new();
+        w.add_polyline(&[[0.0, 0.0], [24.0, 0.0], [24.0, 18.0], [0.0, 18.0]], true);
+        w.add_polyline(&[[2.0, 2.0], [2.0, 16.0], [22.0, 16.0], [22.0, 2.0]], true);
+        for (c, h) in [
+            ([6.0, 0.25], [0.4, 0.25]),
+            ([15.0, 0.2], [0.8, 0.2]),
+            ([23.75, 7.0], [0.25, 0.6]),
+            ([23.8, 13.0], [0.2, 0.3]),
+            ([18.0, 17.75], [0.5, 0.25]),
+            ([9.0, 17.8], [1.0, 0.2]),
+            ([0.25, 12.0], [0.25, 0.4]),
+            ([0.2, 5.0], [0.2, 0.7]),
+        ] {
+            w.add_box(c, h, 0.0);
+        }
+        w
+    }
+
     /// A laboratory like the one mapped by Zhang & Ghosh (ICRA 2000): a
     /// 10 m × 8 m room, (0, 0)–(10, 8), with
     /// - benches along the south wall, x 1.5–4.5 and 6.2–9.0 (0.8 m and
