@@ -27,6 +27,7 @@ use crate::localize::{LocalizationResult, LocalizeError, SegmentIndex, localize}
 use crate::map::cls::{ClsError, ClsMap, local_region, picture};
 use crate::map::{Keyframe, KeyframePolicy, SegmentMap, SegmentMapFile};
 use crate::mapping_config::MapperConfig;
+use crate::render::SegmentStyle;
 use crate::trajectory::{StampedPose, TrajectoryError, write_tum};
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
@@ -296,6 +297,20 @@ impl OfflineMapper {
     /// The keyframes and their pose graph.
     pub fn keyframe_graph(&self) -> &KeyframeGraph {
         &self.graph
+    }
+
+    /// The loop edges of the pose graph as lines between their keyframes'
+    /// positions (map frame), for a picture.
+    pub fn loop_edges(&self) -> Vec<[[f64; 2]; 2]> {
+        let poses = self.graph.poses();
+        self.graph
+            .graph()
+            .loop_edges()
+            .map(|e| {
+                let (a, b) = (poses[e.from], poses[e.to]);
+                [[a.x, a.y], [b.x, b.y]]
+            })
+            .collect()
     }
 
     /// Grow the CLS map only when [`refresh_cls_map`](Self::refresh_cls_map)
@@ -664,13 +679,28 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<(), PipelineError> {
 /// file atomically: the trajectory ([`TRAJECTORY_FILE`]), the segment map
 /// ([`SEGMENTS_FILE`]), the CLS map ([`MAP_FILE`]) and its picture with the
 /// trajectory ([`PICTURE_FILE`]).
-pub fn write_outputs(out_dir: &Path, mapper: &OfflineMapper) -> Result<(), PipelineError> {
+pub fn write_outputs(
+    out_dir: &Path,
+    mapper: &OfflineMapper,
+    draw_loops: bool,
+) -> Result<(), PipelineError> {
     create_output_dir(out_dir)?;
     let mut tum = Vec::new();
     write_tum(&mut tum, mapper.trajectory())?;
     write_file(&out_dir.join(TRAJECTORY_FILE), &tum)?;
     let poses: Vec<Pose2> = mapper.trajectory().iter().map(|(_, p)| *p).collect();
-    write_maps(out_dir, &mapper.map().snapshot(), mapper.cls_map(), &poses)
+    let loops = if draw_loops {
+        mapper.loop_edges()
+    } else {
+        Vec::new()
+    };
+    write_maps(
+        out_dir,
+        &mapper.map().snapshot(),
+        mapper.cls_map(),
+        &poses,
+        &loops,
+    )
 }
 
 /// Creates `out_dir` and its parents if needed.
@@ -683,17 +713,22 @@ pub fn create_output_dir(out_dir: &Path) -> Result<(), PipelineError> {
 
 /// Writes the maps into `out_dir`, each file atomically: the segment map
 /// ([`SEGMENTS_FILE`]), the CLS map ([`MAP_FILE`]) and its picture
-/// ([`PICTURE_FILE`]) with `path` drawn on it.
+/// ([`PICTURE_FILE`]) with `path` (and the loop closures `loops`, each
+/// from one keyframe position to another) drawn on it.
 pub fn write_maps(
     out_dir: &Path,
     segments: &SegmentMapFile,
     cls: &ClsMap,
     path: &[Pose2],
+    loops: &[[[f64; 2]; 2]],
 ) -> Result<(), PipelineError> {
     let json = serde_json::to_vec_pretty(segments)?;
     write_file(&out_dir.join(SEGMENTS_FILE), &json)?;
     cls.save(&out_dir.join(MAP_FILE))?;
-    let pic = picture(cls, Some(path), path.last().copied());
+    let mut pic = picture(cls, Some(path), path.last().copied());
+    for [a, b] in loops {
+        pic.segment(*a, *b, SegmentStyle::LoopEdge);
+    }
     write_file(&out_dir.join(PICTURE_FILE), pic.to_svg().as_bytes())
 }
 
@@ -706,6 +741,7 @@ pub fn run_offline_mapping(
     input: &Path,
     out_dir: &Path,
     config: &MapperConfig,
+    draw_loops: bool,
     progress: &mut dyn FnMut(Progress),
 ) -> Result<MappingSummary, PipelineError> {
     let mut log = open_log(input)?;
@@ -743,7 +779,7 @@ pub fn run_offline_mapping(
             "localization failed on some scans; their odometry prediction was used"
         );
     }
-    write_outputs(out_dir, &mapper)?;
+    write_outputs(out_dir, &mapper, draw_loops)?;
     Ok(summary)
 }
 

@@ -8,7 +8,7 @@
 use clsmap::geometry::{Pose2, wrap_angle};
 use clsmap::input::ScanRecord;
 use clsmap::mapping_config::MapperConfig;
-use clsmap::pipeline::OfflineMapper;
+use clsmap::pipeline::{OfflineMapper, write_outputs};
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
 
 /// Poses every `step` m along the corridor centre line, turning in place
@@ -145,6 +145,16 @@ fn a_long_loop_driven_twice_on_drifting_odometry_closes() {
     eprintln!("laps agree to {worst_lap:.3} m");
     assert!(worst_lap < 0.03, "laps {worst_lap} m apart");
     mapper.cls_map().check_invariants().unwrap();
+    // `clsmap map --draw-loops`: every loop edge on the picture.
+    let out = std::env::temp_dir().join(format!("clsmap-loops-{}", std::process::id()));
+    write_outputs(&out, &mapper, true).unwrap();
+    let svg = std::fs::read_to_string(out.join("map.svg")).unwrap();
+    let edges = mapper.keyframe_graph().graph().loop_edges().count();
+    assert_eq!(svg.matches("#ff7f0e").count(), edges);
+    write_outputs(&out, &mapper, false).unwrap();
+    let svg = std::fs::read_to_string(out.join("map.svg")).unwrap();
+    assert_eq!(svg.matches("#ff7f0e").count(), 0);
+    std::fs::remove_dir_all(&out).unwrap();
 }
 
 /// With no pose moved, the rebuild from the keyframes gives the maps the

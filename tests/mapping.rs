@@ -244,6 +244,7 @@ fn run_offline_mapping_writes_trajectory_and_segments() {
         &excerpt,
         &out,
         &MapperConfig::default(),
+        true,
         &mut |p: Progress| last = Some(p),
     )
     .unwrap();
@@ -284,6 +285,7 @@ fn malformed_input_is_reported_with_its_line() {
         &input,
         &out.join("result"),
         &MapperConfig::default(),
+        false,
         &mut |_| {},
     )
     .unwrap_err();

@@ -16,6 +16,7 @@ pub fn map(
     out: &Path,
     config: Option<&Path>,
     relations: Option<&Path>,
+    draw_loops: bool,
 ) -> anyhow::Result<ExitCode> {
     let config = mapper_config(config)?;
     let bar = ProgressBar::new(0).with_style(
@@ -34,7 +35,7 @@ pub fn map(
             bar.set_message(format!("{} scans", p.scans));
         }
     };
-    let result = pipeline::run_offline_mapping(input, out, &config, &mut on_progress);
+    let result = pipeline::run_offline_mapping(input, out, &config, draw_loops, &mut on_progress);
     bar.finish_and_clear();
     let summary = result.with_context(|| format!("cannot map {}", input.display()))?;
     let t = &summary.mean_time;

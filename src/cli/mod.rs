@@ -135,6 +135,9 @@ enum Command {
         /// Score the trajectory against a relations file (Kümmerle et al. 2009).
         #[arg(long)]
         relations: Option<PathBuf>,
+        /// Draw the accepted loop closures on map.svg (keyframe to keyframe).
+        #[arg(long)]
+        draw_loops: bool,
     },
     /// Draw a CLS map (map.json) as SVG, or export it as a ROS map_server
     /// occupancy grid (PGM + YAML) when the output ends in `.pgm`.
@@ -281,7 +284,14 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             out,
             config,
             relations,
-        } => mapping::map(&input, &out, config.as_deref(), relations.as_deref()),
+            draw_loops,
+        } => mapping::map(
+            &input,
+            &out,
+            config.as_deref(),
+            relations.as_deref(),
+            draw_loops,
+        ),
         Command::Eval {
             trajectory,
             relations,

@@ -53,7 +53,7 @@ impl Checkpoint {
             return Err(fail(error, self.trajectory));
         }
         // The poses are on disk now; a failure below keeps none back.
-        write_maps(&self.dir, &self.segments, &self.cls, &self.path)
+        write_maps(&self.dir, &self.segments, &self.cls, &self.path, &[])
             .map_err(|e| fail(e, Vec::new()))
     }
 }

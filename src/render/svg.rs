@@ -15,6 +15,8 @@ pub enum SegmentStyle {
     Actual,
     /// A frontier of the explored region: dashed.
     Virtual,
+    /// A loop closure between two keyframes: thin, orange.
+    LoopEdge,
 }
 
 /// A picture under construction. Coordinates in metres, map frame.
@@ -128,6 +130,10 @@ impl MapPicture {
                 SegmentStyle::Actual => {
                     format!(r#"stroke="black" stroke-width="{:.3}""#, stroke * 2.0)
                 }
+                SegmentStyle::LoopEdge => format!(
+                    r##"stroke="#ff7f0e" stroke-width="{:.3}" stroke-opacity="0.8""##,
+                    stroke * 0.7
+                ),
                 SegmentStyle::Virtual => format!(
                     r##"stroke="#d62728" stroke-width="{:.3}" stroke-dasharray="{:.3} {:.3}""##,
                     stroke,
