@@ -4,7 +4,9 @@
 //!
 //! The map comes from the simulated long loop (`World::long_loop`, 68 m a
 //! lap) driven until it holds 1,000 keyframes, on odometry with 2 % scale
-//! error and 0.01 rad/m heading drift, so its graph carries real loops.
+//! error and 0.01 rad/m heading drift, so its graph carries real loops;
+//! revisit merging and loop-edge spacing are off, so every keyframe is
+//! kept and every loop found is an edge (the worst case).
 //!
 //! `cargo bench --bench loop_closure -- --warm-up-time 1 --measurement-time 5`
 
@@ -36,7 +38,12 @@ fn mapped_loop() -> OfflineMapper {
     let tour = Tour::new(waypoints, 1.0, 1.0);
     let spec = ScanSpec::lms200_half_degree(0.01);
     let mut rng = Rng::new(9);
-    let mut mapper = OfflineMapper::new(MapperConfig::default());
+    // Every keyframe kept and every loop an edge: the densest graph the
+    // defaults' revisit merging and loop spacing would otherwise thin.
+    let mut config = MapperConfig::default();
+    config.loop_closure.revisit_distance = 0.0;
+    config.loop_closure.agreeing_loop_spacing = 1;
+    let mut mapper = OfflineMapper::new(config);
     let (mut odo, mut prev) = (Pose2::new(-3.0, 5.0, 1.0), tour.pose_at(0.0));
     let mut t = 0.0;
     while mapper.keyframe_graph().len() < KEYFRAMES && t < tour.duration() {

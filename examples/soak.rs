@@ -43,7 +43,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let end = hours * 3600.0;
     let mut robot = VirtualRobot::new(&config)?;
     let started = std::time::Instant::now();
-    println!("virtual s | wall s | scans | keyframes | walls | frontiers | RSS MiB | peak MiB");
+    println!(
+        "virtual s | wall s | scans | keyframes (kept) | loop closures | walls | frontiers | RSS MiB | peak MiB"
+    );
     let mut report_at = 0.0;
     let mut checkpoint_at = config.daemon.checkpoint_interval;
     let dir = std::env::temp_dir().join(format!("clsmap-soak-{}", std::process::id()));
@@ -56,11 +58,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let status = robot.live().status();
             let (rss, peak) = memory_kib();
             println!(
-                "{:9.0} | {:6.1} | {:5} | {:9} | {:5} | {:9} | {:7.1} | {:8.1}",
+                "{:9.0} | {:6.1} | {:5} | {:9} ({:5}) | {:13} | {:5} | {:9} | {:7.1} | {:8.1}",
                 robot.now(),
                 started.elapsed().as_secs_f64(),
                 status.scans,
                 status.keyframes,
+                status.graph_keyframes,
+                status.loops_closed,
                 status.walls,
                 status.frontiers,
                 rss as f64 / 1024.0,
@@ -130,6 +134,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         stats.max_error,
         rss as f64 / 1024.0,
         peak as f64 / 1024.0
+    );
+    let loops = robot.live().mapper().summary().loops;
+    println!(
+        "loop closure: {} loops, {} revisits merged, {} optimisations in {:.2} s, rebuilds {:.2} s, search {:.2} s",
+        loops.accepted,
+        loops.revisits_merged,
+        loops.optimisations,
+        loops.optimise_s,
+        loops.rebuild_s,
+        loops.search_s
     );
     robot.checkpoint(&dir)?;
     println!("checkpoints in {}", dir.display());

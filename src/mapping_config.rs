@@ -352,6 +352,8 @@ impl MapperConfig {
                 lc.chain_sigma_theta_per_radian,
             ),
             ("optimize_above_chi2", lc.optimize_above_chi2),
+            ("revisit_distance", lc.revisit_distance),
+            ("revisit_angle", lc.revisit_angle),
         ] {
             v.check(x, key, value, NonNegative)?;
         }

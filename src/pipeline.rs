@@ -634,7 +634,9 @@ impl OfflineMapper {
                     // This scan is the newest keyframe.
                     outcome.pose = correction.correction.compose(&outcome.pose);
                 }
-                Ok(None) => {}
+                Ok(None) => {
+                    self.graph.merge_revisit(&self.config.loop_closure);
+                }
                 Err(e) => warn!(t = record.scan.t, "pose graph not optimised: {e}"),
             }
             outcome.keyframe = true;

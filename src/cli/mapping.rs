@@ -64,11 +64,12 @@ pub fn map(
     );
     let l = &summary.loops;
     println!(
-        "  loop closure:               {} loops closed ({} by voting) in {} searches, rejected {:?}; {} optimisations ({} loops down-weighted); search {:.0} ms, optimisation {:.0} ms, rebuilds {:.0} ms",
+        "  loop closure:               {} loops closed ({} by voting) in {} searches, rejected {:?}; {} revisits merged; {} optimisations ({} loops down-weighted); search {:.0} ms, optimisation {:.0} ms, rebuilds {:.0} ms",
         l.accepted,
         l.by_voting,
         l.searched,
         l.rejected,
+        l.revisits_merged,
         l.optimisations,
         l.down_weighted,
         l.search_s * 1e3,

@@ -40,6 +40,10 @@ pub struct LiveStatus {
     pub scans: u64,
     pub localized: u64,
     pub keyframes: usize,
+    /// Keyframes kept in the pose graph (revisits of mapped places are
+    /// not kept) and loop closures accepted.
+    pub graph_keyframes: usize,
+    pub loops_closed: usize,
     /// Actual and virtual segments and loops of the CLS map.
     pub walls: usize,
     pub frontiers: usize,
@@ -257,6 +261,8 @@ impl LiveMapper {
             scans: self.scans,
             localized: self.localized,
             keyframes: self.mapper.summary().keyframes,
+            graph_keyframes: self.mapper.keyframe_graph().len(),
+            loops_closed: self.mapper.keyframe_graph().stats().accepted,
             walls: cls.actual_segments().count(),
             frontiers: cls.virtual_segments().count(),
             loops: cls.loops().count(),

@@ -326,8 +326,8 @@ fn status_line(s: &LiveStatus, rate: f64, sensor: &str) -> String {
         ""
     };
     format!(
-        "{sensor} {rate:.1} scans/s, {} scans ({} localized), map {} walls {} frontiers {} loops, {pose}{exploring}",
-        s.scans, s.localized, s.walls, s.frontiers, s.loops
+        "{sensor} {rate:.1} scans/s, {} scans ({} localized), map {} walls {} frontiers {} loops, {} loop closures, {pose}{exploring}",
+        s.scans, s.localized, s.walls, s.frontiers, s.loops, s.loops_closed
     )
 }
 

@@ -97,6 +97,17 @@ pub struct LoopClosureConfig {
     /// the edge waits for the next optimisation). Default 7.8, the 95 %
     /// point of χ² with 3 degrees of freedom.
     pub optimize_above_chi2: f64,
+    /// A keyframe whose loop agrees with the graph and ties it to a kept
+    /// keyframe within this distance (m) and heading difference (rad) is
+    /// not kept: its scan updates the walls but the place is in the graph
+    /// already, so patrolling a mapped floor does not grow memory.
+    /// Defaults 0.3 m and 0.3 rad, a little under the keyframe spacing.
+    pub revisit_distance: f64,
+    pub revisit_angle: f64,
+    /// A loop that agrees with the graph becomes an edge only if the last
+    /// loop edge is at least this many keyframes back. Default 5 (about
+    /// 2.5 m of path); loops that move the map always become edges.
+    pub agreeing_loop_spacing: usize,
     pub optimizer: OptimizerConfig,
 }
 
@@ -126,6 +137,9 @@ impl Default for LoopClosureConfig {
             chain_sigma_theta_per_metre: 0.005,
             chain_sigma_theta_per_radian: 0.02,
             optimize_above_chi2: 7.8,
+            revisit_distance: 0.3,
+            revisit_angle: 0.3,
+            agreeing_loop_spacing: 5,
             optimizer: OptimizerConfig::default(),
         }
     }

@@ -29,6 +29,10 @@ pub struct LoopStats {
     pub by_voting: usize,
     /// Searches that found no verified loop, by reason.
     pub rejected: BTreeMap<String, usize>,
+    /// Keyframes not kept because a loop tied them to a kept keyframe at
+    /// nearly the same pose (a robot patrolling a mapped floor adds no
+    /// keyframes, so memory follows the area, not the time).
+    pub revisits_merged: usize,
     /// Optimisations run, and loop edges the optimiser's kernel
     /// down-weighted in the last one.
     pub optimisations: usize,
@@ -56,6 +60,10 @@ pub struct KeyframeGraph {
     /// Loop edges added since the last optimisation (each agreed with the
     /// graph when it came, but together they may pull a little).
     unoptimised_loops: usize,
+    /// Whether the newest keyframe found a loop that agrees with the graph.
+    newest_agrees: bool,
+    /// The newest keyframe that received a loop edge.
+    last_loop_keyframe: Option<usize>,
 }
 
 impl KeyframeGraph {
@@ -104,6 +112,7 @@ impl KeyframeGraph {
             _ => 0.0,
         };
         let index = self.graph.add_pose(pose);
+        self.newest_agrees = false;
         if let Some(p) = previous {
             let delta = p.between(&pose);
             let mut information = cfg.chain_information(&delta);
@@ -170,7 +179,6 @@ impl KeyframeGraph {
         let edge = m.edge(current, &poses[m.keyframe], cfg);
         let residual = super::edge_error(&edge, &poses[m.keyframe], &poses[current]);
         let chi2 = residual.dot(&(edge.information * residual));
-        self.graph.add_edge(edge)?;
         debug!(
             keyframe = current,
             with = m.keyframe,
@@ -178,11 +186,69 @@ impl KeyframeGraph {
             voting = m.by_voting,
             "loop closed"
         );
-        self.unoptimised_loops += 1;
         if chi2 <= cfg.optimize_above_chi2 {
+            self.newest_agrees = true;
+            // Loops the graph already agrees with stiffen it only a little;
+            // one every few keyframes keeps the graph sparse where a robot
+            // patrols (a loop edge at every keyframe of a small floor makes
+            // its factor dense).
+            let recent = self
+                .last_loop_keyframe
+                .is_some_and(|k| current - k < cfg.agreeing_loop_spacing);
+            if !recent {
+                self.graph.add_edge(edge)?;
+                self.unoptimised_loops += 1;
+                self.last_loop_keyframe = Some(current);
+            }
             return Ok(None);
         }
+        self.graph.add_edge(edge)?;
+        self.unoptimised_loops += 1;
+        self.last_loop_keyframe = Some(current);
         self.optimise(cfg).map(Some)
+    }
+
+    /// Drops the newest keyframe when its loop edge (the graph's last edge,
+    /// added without moving the map) shows the graph consistent there and
+    /// a kept keyframe at least `cfg.min_travel` of path back lies within
+    /// `cfg.revisit_distance` and `cfg.revisit_angle`: that place is in the
+    /// map already. Returns whether it was dropped.
+    pub fn merge_revisit(&mut self, cfg: &LoopClosureConfig) -> bool {
+        let Some(newest) = self.keyframes.len().checked_sub(1) else {
+            return false;
+        };
+        if !self.newest_agrees {
+            return false;
+        }
+        let poses = self.graph.poses();
+        let b = poses[newest];
+        let limit = self.keyframes[newest].travelled - cfg.min_travel;
+        let near = self
+            .keyframes
+            .iter()
+            .zip(poses)
+            .take_while(|(k, _)| k.travelled <= limit)
+            .any(|(_, a)| {
+                (a.x - b.x).hypot(a.y - b.y) <= cfg.revisit_distance
+                    && crate::geometry::wrap_angle(a.theta - b.theta).abs() <= cfg.revisit_angle
+            });
+        if !near {
+            return false;
+        }
+        let had_loop = self
+            .graph
+            .edges()
+            .last()
+            .is_some_and(|e| e.kind == EdgeKind::Loop && e.to == newest);
+        self.graph.pop_pose();
+        self.keyframes.pop();
+        self.newest_agrees = false;
+        if had_loop {
+            self.unoptimised_loops = self.unoptimised_loops.saturating_sub(1);
+            self.last_loop_keyframe = None;
+        }
+        self.stats.revisits_merged += 1;
+        true
     }
 
     /// Optimises once more if loop edges came in since the last
