@@ -11,50 +11,8 @@ use clsmap::mapping_config::MapperConfig;
 use clsmap::pipeline::{OfflineMapper, write_outputs};
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
 
-/// Poses every `step` m along the corridor centre line, turning in place
-/// at the corners, `laps` times round.
-fn tour(corners: &[[f64; 2]], laps: usize, step: f64) -> Vec<Pose2> {
-    let mut truth = vec![Pose2::new(corners[0][0], corners[0][1], 0.0)];
-    for _ in 0..laps {
-        for w in corners.windows(2) {
-            let heading = (w[1][1] - w[0][1]).atan2(w[1][0] - w[0][0]);
-            let mut p = *truth.last().unwrap();
-            while wrap_angle(heading - p.theta).abs() > 1e-9 {
-                let turn = wrap_angle(heading - p.theta).clamp(-0.15, 0.15);
-                p = Pose2::new(p.x, p.y, p.theta + turn);
-                truth.push(p);
-            }
-            let length = (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]);
-            let steps = (length / step).round() as usize;
-            for k in 1..=steps {
-                let f = k as f64 / steps as f64;
-                truth.push(Pose2::new(
-                    w[0][0] + f * (w[1][0] - w[0][0]),
-                    w[0][1] + f * (w[1][1] - w[0][1]),
-                    heading,
-                ));
-            }
-        }
-    }
-    truth
-}
-
-/// Odometry along `truth` with a scale error and a heading drift per
-/// metre, plus a little noise, started in a frame of its own.
-fn drifting_odometry(truth: &[Pose2], scale: f64, drift_per_m: f64, rng: &mut Rng) -> Vec<Pose2> {
-    let mut odo = vec![Pose2::new(-3.0, 5.0, 1.0)];
-    for w in truth.windows(2) {
-        let d = w[0].between(&w[1]);
-        let dist = d.x.hypot(d.y);
-        let biased = Pose2::new(
-            scale * d.x + rng.normal(0.002),
-            scale * d.y + rng.normal(0.002),
-            d.theta + drift_per_m * dist + rng.normal(0.002),
-        );
-        odo.push(odo.last().unwrap().compose(&biased));
-    }
-    odo
-}
+mod common;
+use common::{drifting_odometry, tour};
 
 /// Runs the mapper over the tour; returns it and the RMSE (m) and largest
 /// heading error (rad) of its poses against the truth, in the map frame

@@ -8,7 +8,7 @@
 #![allow(clippy::unwrap_used)]
 
 use clsmap::eval::{Relation, RelationErrors, evaluate, read_relations};
-use clsmap::geometry::{Pose2, wrap_angle};
+use clsmap::geometry::Pose2;
 use clsmap::input::{ScanRecord, open_log};
 use clsmap::map::SegmentMapFile;
 use clsmap::mapping_config::MapperConfig;
@@ -16,6 +16,9 @@ use clsmap::pipeline::{OfflineMapper, Progress, run_offline_mapping};
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
 use clsmap::trajectory::read_tum;
 use std::path::PathBuf;
+
+mod common;
+use common::{drifting_odometry, tour};
 
 fn csail_dir() -> Option<PathBuf> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/datasets/mit-csail");
@@ -138,38 +141,9 @@ fn simulated_loop_with_biased_odometry() {
     let mut rng = Rng::new(7);
     // Waypoints on the corridor centre line; turn in place at corners.
     let corners: [[f64; 2]; 5] = [[1.0, 1.0], [11.0, 1.0], [11.0, 9.0], [1.0, 9.0], [1.0, 1.0]];
-    let mut truth = vec![Pose2::new(1.0, 1.0, 0.0)];
-    for w in corners.windows(2) {
-        let heading = (w[1][1] - w[0][1]).atan2(w[1][0] - w[0][0]);
-        let mut p = *truth.last().unwrap();
-        while wrap_angle(heading - p.theta).abs() > 1e-9 {
-            let turn = wrap_angle(heading - p.theta).clamp(-0.15, 0.15);
-            p = Pose2::new(p.x, p.y, p.theta + turn);
-            truth.push(p);
-        }
-        let length = (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]);
-        let steps = (length / 0.1).round() as usize;
-        for k in 1..=steps {
-            let f = k as f64 / steps as f64;
-            truth.push(Pose2::new(
-                w[0][0] + f * (w[1][0] - w[0][0]),
-                w[0][1] + f * (w[1][1] - w[0][1]),
-                heading,
-            ));
-        }
-    }
+    let truth = tour(&corners, 1, 0.1);
     // Odometry: the true increments, biased and noisy.
-    let mut odo = vec![Pose2::new(-3.0, 5.0, 1.0)];
-    for w in truth.windows(2) {
-        let d = w[0].between(&w[1]);
-        let dist = d.x.hypot(d.y);
-        let biased = Pose2::new(
-            1.03 * d.x + rng.normal(0.002),
-            1.03 * d.y + rng.normal(0.002),
-            d.theta + 0.0175 * dist + rng.normal(0.002),
-        );
-        odo.push(odo.last().unwrap().compose(&biased));
-    }
+    let odo = drifting_odometry(&truth, 1.03, 0.0175, &mut rng);
     let mut mapper = OfflineMapper::new(MapperConfig::default());
     for (k, (t, o)) in truth.iter().zip(&odo).enumerate() {
         let time = 100.0 + 0.2 * k as f64;
