@@ -311,51 +311,100 @@ fn recovers_pose_in_room_and_loop_at_all_noise_levels() {
 
 /// In a plain corridor the along-corridor direction is flagged and the
 /// prediction kept along it, at every noise level; y and θ are recovered.
-/// With door recesses the same holds up to 1 cm noise. (At 3 cm a 15 cm
-/// recess is below the extractor's resolution with a 12 cm split threshold:
-/// it comes out as short tilted lines, segmented differently in each scan,
-/// which fake a little along-corridor information.)
 #[test]
 fn corridor_flags_the_along_axis_and_recovers_the_rest() {
     let cfg = LocalizerConfig::default();
-    for (place, sigmas) in [
-        (Place::Corridor, &[0.0, 0.01, 0.03][..]),
-        (Place::DoorCorridor, &[0.0, 0.01][..]),
-    ] {
-        let world = place.world();
-        for (j, &sigma) in sigmas.iter().enumerate() {
-            let mut good = 0;
-            let n = 60;
-            let tol = if sigma > 0.02 { 3.0 } else { 1.0 };
-            for k in 0..n {
-                let case = make_case(place, &world, sigma, 50_000 + 1000 * j as u64 + k);
-                let r = localize(&case.local, &case.map, case.predicted, &prior(), &cfg)
-                    .unwrap_or_else(|e| panic!("{place:?} σ={sigma} case {k}: {e}"));
-                let Some(v) = r.degenerate else {
-                    panic!("{place:?} σ={sigma} case {k}: not flagged degenerate");
-                };
-                assert!(v[0].abs() > 0.999, "unobservable direction {v:?}");
-                // Across the corridor and the heading are recovered; along
-                // it the prediction is kept.
-                let across = (r.pose.y - case.truth.y).abs();
-                let turn = wrap_angle(r.pose.theta - case.truth.theta).abs();
-                let kept = (r.pose.x - case.predicted.x).abs();
-                if across <= tol * POS_TOL && turn <= tol * ANGLE_TOL && kept < 0.005 {
-                    good += 1;
-                }
-                // The covariance says so: along the corridor it is the
-                // prior's, across it millimetres.
-                assert!(
-                    r.covariance[0][0] > 0.5 * prior()[0][0] && r.covariance[1][1] < 1e-4,
-                    "{place:?} σ={sigma} case {k}: {:?}",
-                    r.covariance
-                );
+    let place = Place::Corridor;
+    let world = place.world();
+    for (j, &sigma) in [0.0, 0.01, 0.03].iter().enumerate() {
+        let mut good = 0;
+        let n = 60;
+        let tol = if sigma > 0.02 { 3.0 } else { 1.0 };
+        for k in 0..n {
+            let case = make_case(place, &world, sigma, 50_000 + 1000 * j as u64 + k);
+            let r = localize(&case.local, &case.map, case.predicted, &prior(), &cfg)
+                .unwrap_or_else(|e| panic!("{place:?} σ={sigma} case {k}: {e}"));
+            let Some(v) = r.degenerate else {
+                panic!("{place:?} σ={sigma} case {k}: not flagged degenerate");
+            };
+            assert!(v[0].abs() > 0.999, "unobservable direction {v:?}");
+            // Across the corridor and the heading are recovered; along
+            // it the prediction is kept.
+            let across = (r.pose.y - case.truth.y).abs();
+            let turn = wrap_angle(r.pose.theta - case.truth.theta).abs();
+            let kept = (r.pose.x - case.predicted.x).abs();
+            if across <= tol * POS_TOL && turn <= tol * ANGLE_TOL && kept < 0.005 {
+                good += 1;
             }
+            // The covariance says so: along the corridor it is the
+            // prior's, across it millimetres.
             assert!(
-                good as f64 >= 0.99 * n as f64,
-                "{place:?} σ={sigma}: {good}/{n}"
+                r.covariance[0][0] > 0.5 * prior()[0][0] && r.covariance[1][1] < 1e-4,
+                "{place:?} σ={sigma} case {k}: {:?}",
+                r.covariance
             );
         }
+        assert!(
+            good as f64 >= 0.99 * n as f64,
+            "{place:?} σ={sigma}: {good}/{n}"
+        );
+    }
+}
+
+/// With door recesses in view, their jambs are true wall ends: the walls'
+/// ends pin the along-corridor direction, which is then recovered, not
+/// flagged (before wall ends it was flagged in every case). Measured:
+/// σ = 0: 36/60 observable, 28 of them within 30 mm, median along-corridor
+/// error 10.6 mm; σ = 1 cm: 12/60, 11, 9.0 mm.
+#[test]
+fn door_jambs_make_a_corridor_observable_along_its_length() {
+    let cfg = LocalizerConfig::default();
+    let place = Place::DoorCorridor;
+    let world = place.world();
+    for (j, &sigma) in [0.0, 0.01].iter().enumerate() {
+        let n = 60;
+        let (mut observable, mut good) = (0, 0);
+        let mut along = Vec::new();
+        for k in 0..n {
+            let case = make_case(place, &world, sigma, 50_000 + 1000 * j as u64 + k);
+            let r = localize(&case.local, &case.map, case.predicted, &prior(), &cfg)
+                .unwrap_or_else(|e| panic!("{place:?} σ={sigma} case {k}: {e}"));
+            if r.degenerate.is_some() {
+                continue;
+            }
+            observable += 1;
+            let err = (r.pose.x - case.truth.x).hypot(r.pose.y - case.truth.y);
+            let turn = wrap_angle(r.pose.theta - case.truth.theta).abs();
+            along.push((r.pose.x - case.truth.x).abs());
+            if err <= 3.0 * POS_TOL && turn <= ANGLE_TOL {
+                good += 1;
+            }
+        }
+        along.sort_by(f64::total_cmp);
+        let median = along.get(along.len() / 2).copied().unwrap_or(f64::NAN);
+        eprintln!(
+            "door corridor σ={sigma}: {observable}/{n} observable, {good} within {:.0} mm; median along error {:.1} mm",
+            3.0 * POS_TOL * 1e3,
+            median * 1e3
+        );
+        // Jambs count only where the beam meets the wall steeply enough
+        // (within about 4 m along a 2 m corridor), and the predictions are
+        // up to 20 cm off, so not every pair of scans shares a jamb.
+        // With range noise the end trimming often keeps the fitted end a
+        // beam short of the jamb, and only the very next beam is read.
+        let least = if sigma > 0.0 { n / 6 } else { n / 2 };
+        assert!(
+            observable >= least,
+            "{place:?} σ={sigma}: {observable}/{n} observable"
+        );
+        assert!(
+            good * 4 >= observable * 3,
+            "{place:?} σ={sigma}: {good}/{observable} good"
+        );
+        assert!(
+            median < 0.02,
+            "{place:?} σ={sigma}: median along error {median} m"
+        );
     }
 }
 

@@ -240,7 +240,8 @@ fn run_offline_mapping_writes_trajectory_and_segments() {
     let segments: SegmentMapFile =
         serde_json::from_slice(&std::fs::read(out.join("segments.json")).unwrap()).unwrap();
     assert_eq!(segments.segments.len(), summary.segments);
-    assert!(summary.segments > 10);
+    // The robot turns on the spot here: one or two keyframes' walls.
+    assert!(summary.segments > 5, "{} segments", summary.segments);
     std::fs::remove_dir_all(&out).unwrap();
 }
 

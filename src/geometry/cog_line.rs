@@ -37,6 +37,33 @@ pub struct CogLine {
     pub end: [f64; 2],
     /// Number of range points the line was fitted to.
     pub n_points: usize,
+    /// Which ends are true ends of the wall, with their along-line σ.
+    #[serde(default, skip_serializing_if = "WallEnds::is_none")]
+    pub wall_ends: WallEnds,
+}
+
+/// The ends of a line that are true ends of its wall — a corner with the
+/// next surface, or a jamb where the range jumps away behind it — each
+/// with the standard deviation of its position along the line (m). `None`
+/// where the view of the wall stops for another reason: a nearer object
+/// in front, the edge of the field of view, the range limit, or a wall
+/// that goes on. A true end pins the line along its own direction, which
+/// a corridor otherwise leaves free.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct WallEnds {
+    pub start: Option<f64>,
+    pub end: Option<f64>,
+}
+
+impl WallEnds {
+    pub const NONE: WallEnds = WallEnds {
+        start: None,
+        end: None,
+    };
+
+    pub fn is_none(&self) -> bool {
+        self.start.is_none() && self.end.is_none()
+    }
 }
 
 impl CogLine {
@@ -62,6 +89,7 @@ impl CogLine {
             start: [centre[0] + c * s_start, centre[1] + s * s_start],
             end: [centre[0] + c * s_end, centre[1] + s * s_end],
             n_points,
+            wall_ends: WallEnds::NONE,
         }
     }
 
@@ -101,6 +129,7 @@ impl CogLine {
             start: pose.transform_point(self.start),
             end: pose.transform_point(self.end),
             n_points: self.n_points,
+            wall_ends: self.wall_ends,
         }
     }
 

@@ -13,7 +13,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::cog_line::CogLine;
+use super::cog_line::{CogLine, WallEnds};
+use super::ends::wall_end;
 use super::fit::{PrefixMoments, cog_line};
 use super::points::{ScanPoint, collect_points};
 use super::pose::Pose2;
@@ -196,10 +197,14 @@ impl LineExtractor {
             let Some(fit) = self.moments.fit(span.first, span.last) else {
                 continue;
             };
-            let Some(line) = cog_line(&points[span.first..=span.last], &fit) else {
+            let Some(mut line) = cog_line(&points[span.first..=span.last], &fit) else {
                 continue;
             };
             if line.length() >= cfg.min_length {
+                line.wall_ends = WallEnds {
+                    start: wall_end(scan, mount, cfg, &points[span.first], &line, -1),
+                    end: wall_end(scan, mount, cfg, &points[span.last], &line, 1),
+                };
                 out.push(line);
             }
         }

@@ -183,6 +183,7 @@ mod tests {
                     p,
                     beam: [p[0] / r, p[1] / r],
                     sigma_range: sigma,
+                    beam_index: 0,
                 }
             })
             .collect()
@@ -216,6 +217,7 @@ mod tests {
                 p: [3.0, -0.5 + 0.1 * i as f64],
                 beam: [1.0, 0.0],
                 sigma_range: sigma,
+                beam_index: i,
             })
             .collect();
         let mut m = PrefixMoments::default();

@@ -14,12 +14,14 @@ pub(crate) struct ScanPoint {
     pub beam: [f64; 2],
     /// Standard deviation of the range reading (m).
     pub sigma_range: f64,
+    /// Index of the beam in the scan.
+    pub beam_index: usize,
 }
 
 /// Whether a beam carries a range the extractor may use: error codes are
 /// already `Err`, and non-finite, too-short or too-long readings are dropped
 /// here so they never reach the fit.
-fn usable_range(r: f64, cfg: &ExtractionConfig) -> bool {
+pub(crate) fn usable_range(r: f64, cfg: &ExtractionConfig) -> bool {
     r.is_finite() && r >= cfg.min_range && r <= cfg.max_range
 }
 
@@ -52,6 +54,7 @@ pub(crate) fn collect_points(
             p: [mount.x + r * dir[0], mount.y + r * dir[1]],
             beam: dir,
             sigma_range: cfg.range_noise.sigma(r),
+            beam_index: i,
         });
     }
 }

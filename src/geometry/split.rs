@@ -305,6 +305,7 @@ mod tests {
                 p,
                 beam: [1.0, 0.0],
                 sigma_range: 0.01,
+                beam_index: 0,
             })
             .collect()
     }

@@ -12,6 +12,14 @@ use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 
 use crate::geometry::{CogLine, Pose2, wrap_angle};
 
+/// Farthest apart (m, beyond 3 σ) a local and a map wall end may be and
+/// still be taken for the same end.
+const WALL_END_GATE: f64 = 0.25;
+/// In the final least squares a wall end agrees within this many σ plus
+/// a slack (m) for the pose still settling.
+const WALL_END_FINAL_SIGMAS: f64 = 4.0;
+const WALL_END_FINAL_SLACK: f64 = 0.02;
+
 /// Which residuals each matched pair contributes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -115,6 +123,42 @@ impl NormalEquations {
         let (s, c) = pose.theta.sin_cos();
         let n = map.normal();
         let centre = local.centre();
+        // True wall ends seen in both: the local end lies at the map end
+        // along the wall (the one constraint a corridor's walls lack).
+        let d = map.direction();
+        let ends = [
+            (
+                local.wall_ends.start,
+                map.wall_ends.start,
+                local.start,
+                map.start,
+            ),
+            (local.wall_ends.end, map.wall_ends.end, local.end, map.end),
+        ];
+        for (sl, sm, q, m) in ends {
+            let (Some(sl), Some(sm)) = (sl, sm) else {
+                continue;
+            };
+            let rq = [c * q[0] - s * q[1], s * q[0] + c * q[1]];
+            let p = [rq[0] + pose.x, rq[1] + pose.y];
+            let r = d[0] * (p[0] - m[0]) + d[1] * (p[1] - m[1]);
+            let var = sl.max(floors.sigma_c).powi(2) + sm.max(floors.sigma_c).powi(2);
+            // Ends farther apart than this are not the same end (another
+            // jamb of the same wall, a wall seen in part): while the robust
+            // iterations still move the pose, ends within 25 cm are tried
+            // and the kernel tames wrong ones; the final least squares
+            // (no kernel, pose converged) keeps only ends that agree.
+            let gate = if self.robust_scale > 0.0 {
+                WALL_END_GATE + 3.0 * var.sqrt()
+            } else {
+                WALL_END_FINAL_SIGMAS * var.sqrt() + WALL_END_FINAL_SLACK
+            };
+            if r.abs() > gate {
+                continue;
+            }
+            let j = Vector3::new(d[0], d[1], -d[0] * rq[1] + d[1] * rq[0]);
+            self.add_row(j, r, var);
+        }
         let mut point_row = |q: [f64; 2], local_var: f64| {
             let rq = [c * q[0] - s * q[1], s * q[0] + c * q[1]];
             let p = [rq[0] + pose.x, rq[1] + pose.y];

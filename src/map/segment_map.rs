@@ -25,7 +25,7 @@
 //! were themselves derived from this map) do not make the map rigid beyond
 //! what those observations justify.
 
-use crate::geometry::{CogLine, Pose2, wrap_angle};
+use crate::geometry::{CogLine, Pose2, WallEnds, wrap_angle};
 use crate::localize::{CorrespondenceConfig, SegmentId, SegmentIndex, match_score};
 use serde::{Deserialize, Serialize};
 
@@ -133,8 +133,20 @@ pub fn blur_by_pose(line_robot: &CogLine, pose: &Pose2, cov: &[[f64; 3]; 3]) -> 
     let (var_t, var_c) = pose_blur(&line, pose, cov);
     line.sigma_theta = (line.sigma_theta.powi(2) + var_t).sqrt();
     line.sigma_c = (line.sigma_c.powi(2) + var_c).sqrt();
+    // The ends move along the line with the pose's along-line spread.
+    let d = line.direction();
+    let var_along =
+        d[0] * d[0] * cov[0][0] + 2.0 * d[0] * d[1] * cov[0][1] + d[1] * d[1] * cov[1][1];
+    let grow = |s: Option<f64>| s.map(|s| (s * s + var_along.max(0.0)).sqrt());
+    line.wall_ends = WallEnds {
+        start: grow(line.wall_ends.start),
+        end: grow(line.wall_ends.end),
+    };
     line
 }
+
+/// Extremes of fused lines this close together (m) are the same end.
+const WALL_END_TOLERANCE: f64 = 0.05;
 
 /// Fuses two lines measured as the same wall (same direction sense) into
 /// one; see the module documentation. `None` if the directions cancel or a
@@ -174,7 +186,27 @@ pub fn fuse(a: &CogLine, b: &CogLine) -> Option<CogLine> {
     let ends = [a.start, a.end, b.start, b.end].map(along);
     let s_min = ends.iter().copied().fold(f64::INFINITY, f64::min);
     let s_max = ends.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let fused = CogLine::from_centre(
+    // A kept extreme is a true wall end if a line that reaches it (to the
+    // tolerance) saw a true end there; the surest such view sets its σ. A
+    // view reaching farther without an end there means the wall goes on.
+    let flags = [
+        a.wall_ends.start,
+        a.wall_ends.end,
+        b.wall_ends.start,
+        b.wall_ends.end,
+    ];
+    let end_at = |extreme: f64| {
+        ends.iter()
+            .zip(flags)
+            .filter(|(s, _)| (**s - extreme).abs() <= WALL_END_TOLERANCE)
+            .filter_map(|(_, f)| f)
+            .reduce(f64::min)
+    };
+    let wall_ends = WallEnds {
+        start: end_at(s_min),
+        end: end_at(s_max),
+    };
+    let mut fused = CogLine::from_centre(
         theta,
         centre,
         s_min,
@@ -183,6 +215,7 @@ pub fn fuse(a: &CogLine, b: &CogLine) -> Option<CogLine> {
         var_off.sqrt(),
         a.n_points.saturating_add(b.n_points),
     );
+    fused.wall_ends = wall_ends;
     let finite = [
         fused.theta,
         fused.xc,

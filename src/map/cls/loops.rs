@@ -52,9 +52,11 @@ impl ClsSegment {
     /// exactly, the line carries the wall's best estimate.
     pub fn actual_on(line: &CogLine, start: [f64; 2], end: [f64; 2]) -> ClsSegment {
         ClsSegment {
+            // A piece of a wall has no wall ends of its own.
             line: CogLine {
                 start,
                 end,
+                wall_ends: crate::geometry::WallEnds::NONE,
                 ..*line
             },
             mode: SegmentMode::Actual,
@@ -102,6 +104,7 @@ pub fn line_between(start: [f64; 2], end: [f64; 2]) -> CogLine {
         start,
         end,
         n_points: 0,
+        wall_ends: crate::geometry::WallEnds::NONE,
     }
 }
 

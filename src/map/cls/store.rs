@@ -286,6 +286,7 @@ fn shapes_from_records(records: &[SegmentRecord]) -> Result<Vec<ClsShape>, Store
                 start: r.start,
                 end: r.end,
                 n_points: 0,
+                wall_ends: crate::geometry::WallEnds::NONE,
             };
             segments.push(ClsSegment { line, mode: r.mode });
             k = r.next;

@@ -421,6 +421,7 @@ fn piece(s: &ClsSegment, from: [f64; 2], to: [f64; 2]) -> ClsSegment {
         line: CogLine {
             start: from,
             end: to,
+            wall_ends: crate::geometry::WallEnds::NONE,
             ..s.line
         },
         mode: s.mode,
