@@ -287,9 +287,9 @@ impl OfflineMapper {
         &self.map
     }
 
-    /// The Closed Line Segment map grown so far (out of date after a loop
-    /// closure while its rebuild is deferred; see
-    /// [`defer_cls_rebuild`](Self::defer_cls_rebuild)).
+    /// The Closed Line Segment map grown so far (with its rebuild deferred,
+    /// see [`defer_cls_rebuild`](Self::defer_cls_rebuild), empty or out of
+    /// date until [`finish`](Self::finish)).
     pub fn cls_map(&self) -> &ClsMap {
         &self.cls
     }
@@ -419,7 +419,8 @@ impl OfflineMapper {
 
     /// Hands over the poses recorded so far and forgets them, so a mapper
     /// that runs for days keeps its memory bounded (the daemon appends
-    /// them to its trajectory file at each checkpoint).
+    /// them to its trajectory file at each checkpoint). Poses handed over
+    /// are not moved by later loop closures.
     pub fn take_trajectory(&mut self) -> Vec<StampedPose> {
         self.anchors.clear();
         std::mem::take(&mut self.trajectory)
@@ -473,9 +474,7 @@ impl OfflineMapper {
     fn apply_correction(&mut self, c: &Correction) {
         let poses = self.graph.poses();
         self.predictor.reframe(&c.correction);
-        if let Some(newest) = poses.last() {
-            self.keyframes.reframe(*newest);
-        }
+        self.keyframes.reframe(&c.correction);
         for ((_, pose), anchor) in self.trajectory.iter_mut().zip(&self.anchors) {
             if let Some((k, relative)) = anchor {
                 *pose = poses[*k].compose(relative);
@@ -608,36 +607,41 @@ impl OfflineMapper {
                 }
             }
             self.clocks[CLS_UPDATE].add(t.elapsed());
-            let first = self.graph.is_empty();
-            let keyframe = Keyframe {
-                t: record.scan.t,
-                lines: self.lines.clone(),
-                region: region.ok(),
-                covariance: cov,
-                travelled: 0.0,
-            };
-            self.graph.add(
-                keyframe,
-                outcome.pose,
-                outcome.localized || first,
-                &self.config.loop_closure,
-            );
-            let closed = self.graph.close_loop(
-                &self.config.map,
-                &self.config.localizer,
-                &GlobalConfig::default(),
-                &self.config.loop_closure,
-            );
-            match closed {
-                Ok(Some(correction)) => {
-                    self.apply_correction(&correction);
-                    // This scan is the newest keyframe.
-                    outcome.pose = correction.correction.compose(&outcome.pose);
+            // Keyframes are kept for loop closure and for a deferred CLS
+            // map; a live mapper without loop closure needs neither, and
+            // would only grow.
+            if self.config.loop_closure.enabled || self.defer_cls_rebuild {
+                let first = self.graph.is_empty();
+                let keyframe = Keyframe {
+                    t: record.scan.t,
+                    lines: self.lines.clone(),
+                    region: region.ok(),
+                    covariance: cov,
+                    travelled: 0.0,
+                };
+                self.graph.add(
+                    keyframe,
+                    outcome.pose,
+                    outcome.localized || first,
+                    &self.config.loop_closure,
+                );
+                let closed = self.graph.close_loop(
+                    &self.config.map,
+                    &self.config.localizer,
+                    &GlobalConfig::default(),
+                    &self.config.loop_closure,
+                );
+                match closed {
+                    Ok(Some(correction)) => {
+                        self.apply_correction(&correction);
+                        // This scan is the newest keyframe.
+                        outcome.pose = correction.correction.compose(&outcome.pose);
+                    }
+                    Ok(None) => {
+                        self.graph.merge_revisit(&self.config.loop_closure);
+                    }
+                    Err(e) => warn!(t = record.scan.t, "pose graph not optimised: {e}"),
                 }
-                Ok(None) => {
-                    self.graph.merge_revisit(&self.config.loop_closure);
-                }
-                Err(e) => warn!(t = record.scan.t, "pose graph not optimised: {e}"),
             }
             outcome.keyframe = true;
             self.summary.keyframes += 1;

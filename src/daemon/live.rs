@@ -297,6 +297,12 @@ impl LiveMapper {
         failed.error
     }
 
+    /// The end of a run: the mapper's last optimisation and rebuild (see
+    /// [`OfflineMapper::finish`]).
+    pub fn finish(&mut self) {
+        self.mapper.finish();
+    }
+
     /// Writes a checkpoint into `dir` now (see [`Checkpoint::write`]).
     pub fn checkpoint(&mut self, dir: &Path) -> Result<(), PipelineError> {
         let _span = info_span!("checkpoint").entered();

@@ -751,6 +751,9 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
         let result = task.await;
         d.checkpoint_done(result);
     }
+    // Loops that agreed with the graph but were not optimised yet are
+    // taken in before the last save.
+    d.live.finish();
     let saved = d.save();
     let joined = tokio::task::spawn_blocking(move || sensor.stop()).await;
     if joined.is_err() {

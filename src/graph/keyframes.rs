@@ -23,7 +23,9 @@ use crate::map::{Keyframe, SegmentMap, SegmentMapConfig};
 pub struct LoopStats {
     /// Keyframes that had at least one candidate in their search window.
     pub searched: usize,
-    /// Verified loops added to the graph.
+    /// Verified loops (an agreeing one closer than
+    /// `agreeing_loop_spacing` to the last loop edge is counted but not
+    /// added as an edge).
     pub accepted: usize,
     /// Of those, found by the voting search (the others by local matching).
     pub by_voting: usize,
@@ -64,6 +66,12 @@ pub struct KeyframeGraph {
     newest_agrees: bool,
     /// The newest keyframe that received a loop edge.
     last_loop_keyframe: Option<usize>,
+    /// Path driven through every keyframe taken, kept or merged (m), and
+    /// the pose of the last one taken (map frame).
+    odometer: f64,
+    last_taken: Option<Pose2>,
+    /// Keyframes taken, kept or merged: the voting cadence counts these.
+    taken: usize,
 }
 
 impl KeyframeGraph {
@@ -107,10 +115,12 @@ impl KeyframeGraph {
         cfg: &LoopClosureConfig,
     ) -> usize {
         let previous = self.graph.poses().last().copied();
-        keyframe.travelled = match (previous, self.keyframes.last()) {
-            (Some(p), Some(k)) => k.travelled + (pose.x - p.x).hypot(pose.y - p.y),
-            _ => 0.0,
-        };
+        if let Some(p) = self.last_taken {
+            self.odometer += (pose.x - p.x).hypot(pose.y - p.y);
+        }
+        self.last_taken = Some(pose);
+        self.taken += 1;
+        keyframe.travelled = self.odometer;
         let index = self.graph.add_pose(pose);
         self.newest_agrees = false;
         if let Some(p) = previous {
@@ -157,7 +167,7 @@ impl KeyframeGraph {
             keyframes: &self.keyframes,
             poses: self.graph.poses(),
             current,
-            allow_voting: current % cfg.vote_every.max(1) == 0,
+            allow_voting: self.taken % cfg.vote_every.max(1) == 0,
         };
         let found = trace_span!("loop_search")
             .in_scope(|| close_loop(&query, fusion, localizer, global, cfg));
@@ -205,12 +215,23 @@ impl KeyframeGraph {
         self.graph.add_edge(edge)?;
         self.unoptimised_loops += 1;
         self.last_loop_keyframe = Some(current);
-        self.optimise(cfg).map(Some)
+        match self.optimise(cfg) {
+            Ok(c) => Ok(Some(c)),
+            Err(e) => {
+                // The poses are rolled back; the loop that could not be
+                // optimised goes too, or every later optimisation would
+                // fail on it.
+                self.graph.pop_edge();
+                self.unoptimised_loops -= 1;
+                self.stats.accepted -= 1;
+                Err(e)
+            }
+        }
     }
 
-    /// Drops the newest keyframe when its loop edge (the graph's last edge,
-    /// added without moving the map) shows the graph consistent there and
-    /// a kept keyframe at least `cfg.min_travel` of path back lies within
+    /// Drops the newest keyframe when its loop search found a loop that
+    /// agrees with the graph (added as an edge or not) and a kept keyframe
+    /// at least `cfg.min_travel` of path back lies within
     /// `cfg.revisit_distance` and `cfg.revisit_angle`: that place is in the
     /// map already. Returns whether it was dropped.
     pub fn merge_revisit(&mut self, cfg: &LoopClosureConfig) -> bool {
@@ -265,20 +286,30 @@ impl KeyframeGraph {
         let current = self.graph.poses().len().saturating_sub(1);
         let before = self.graph.poses()[current];
         let started = Instant::now();
-        let report = trace_span!("optimise").in_scope(|| self.graph.optimize(&cfg.optimizer))?;
+        let saved = self.graph.poses().to_vec();
+        let report = match trace_span!("optimise").in_scope(|| self.graph.optimize(&cfg.optimizer))
+        {
+            Ok(r) => r,
+            Err(e) => {
+                self.graph.set_poses(saved);
+                return Err(e);
+            }
+        };
         self.stats.optimise_s += started.elapsed().as_secs_f64();
         self.stats.optimisations += 1;
         self.stats.down_weighted = report.loops_down_weighted;
         self.unoptimised_loops = 0;
         let after = self.graph.poses()[current];
-        Ok(Correction {
-            correction: after.compose(&before.inverse()),
-            report,
-        })
+        let correction = after.compose(&before.inverse());
+        if let Some(p) = &mut self.last_taken {
+            *p = correction.compose(p);
+        }
+        Ok(Correction { correction, report })
     }
 
-    /// The walls of every keyframe fused in keyframe order at the current
-    /// poses: what the incremental updates built, for the same poses.
+    /// The walls of every kept keyframe fused in keyframe order at the
+    /// current poses: what the incremental updates built for the same
+    /// poses, less the scans of merged revisits.
     pub fn rebuild_walls(&mut self, config: SegmentMapConfig) -> SegmentMap {
         let started = Instant::now();
         let mut map = SegmentMap::new(config);

@@ -4,15 +4,14 @@
 //!
 //! # Why a solver of its own
 //!
-//! The graph is a chain of keyframes with a few loop edges. In keyframe
-//! order its Cholesky factor fills in only between the ends of each loop
-//! (O(n · loops) blocks), so the natural order is already a good
-//! elimination order and no fill-reducing ordering is needed: the sparse
-//! Cholesky of `nalgebra-sparse` (the linear-algebra crate the localizer
-//! already uses) solves a 1,000-keyframe graph in milliseconds (see
-//! `benches/loop_closure.rs`). The factor-graph crates compared in
-//! `docs` (factrs, apex-solver) bring 100–230 crates for the same
-//! Gauss–Newton step.
+//! The normal equations are 3×3 blocks over keyframes; `nalgebra-sparse`
+//! (from the linear-algebra family the localizer already uses) factors
+//! them, in a minimum-degree order computed here over the blocks (its own
+//! Cholesky does no fill-reducing ordering, and a floor driven round many
+//! times fills in badly in keyframe order). A 1,000-keyframe graph with
+//! 330 loop edges optimises in about 18 ms (`benches/loop_closure.rs`);
+//! the factor-graph crates (factrs, apex-solver) bring 100–230 crates for
+//! the same Gauss–Newton step.
 //!
 //! # Robustness
 //!
@@ -70,15 +69,16 @@ pub struct Edge {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct OptimizerConfig {
-    /// Levenberg–Marquardt iteration cap over all kernel stages. Default
-    /// 60; each stage converges in 2–8.
+    /// Levenberg–Marquardt iterations over all kernel stages (each stage
+    /// still gets one once the cap is reached). Default 60; a stage
+    /// converges in 2–8.
     pub max_iterations: usize,
     /// Stop once no pose moves more than this in one step (m, and rad for
     /// the heading). Default 1e-5.
     pub converged_step: f64,
     /// Dynamic covariance scaling `Φ` of loop edges (a χ² value); 0
     /// disables the kernel. Default 5: a loop consistent with the chain
-    /// to about 2σ keeps its full weight, one at 10σ keeps 4 %.
+    /// to about 2σ keeps its full weight, one at 7σ about 4 %, at 10σ 1 %.
     pub loop_kernel: f64,
 }
 
@@ -218,6 +218,19 @@ impl PoseGraph {
         &self.edges
     }
 
+    /// Removes the newest edge.
+    pub fn pop_edge(&mut self) -> Option<Edge> {
+        self.edges.pop()
+    }
+
+    /// Replaces every pose estimate (a rollback); ignored unless the count
+    /// matches.
+    pub fn set_poses(&mut self, poses: Vec<Pose2>) {
+        if poses.len() == self.poses.len() {
+            self.poses = poses;
+        }
+    }
+
     /// Removes the newest pose and the edges that reach it.
     pub fn pop_pose(&mut self) -> Option<Pose2> {
         let last = self.poses.len().checked_sub(1)?;
@@ -343,7 +356,11 @@ impl PoseGraph {
             // (or the damping says there is none).
             let mut accepted = None;
             while lambda < 1e8 {
-                let step = solve_damped(&h, &g, order, lambda)?;
+                // A system too ill-conditioned to factor gets more damping.
+                let Ok(step) = solve_damped(&h, &g, order, lambda) else {
+                    lambda *= 4.0;
+                    continue;
+                };
                 let mut trial = self.poses.clone();
                 for (i, p) in trial.iter_mut().enumerate().skip(1) {
                     let k = 3 * (i - 1);

@@ -25,7 +25,8 @@ pub struct Keyframe {
     /// Pose covariance when the keyframe was taken (x, y, θ; m², m·rad,
     /// rad²): how much the fusion blurs its lines.
     pub covariance: [[f64; 3]; 3],
-    /// Path length from the first keyframe to this one (m).
+    /// Path driven from the first keyframe to this one, through every
+    /// keyframe taken, kept or merged (m).
     pub travelled: f64,
 }
 
@@ -70,11 +71,11 @@ impl KeyframePolicy {
         self.config = config;
     }
 
-    /// Moves the reference keyframe pose with the map frame (after the
-    /// pose graph corrected it).
-    pub fn reframe(&mut self, pose: Pose2) {
-        if self.last.is_some() {
-            self.last = Some(pose);
+    /// Moves the reference keyframe pose with the map frame after the pose
+    /// graph corrected it: `correction ∘ last`.
+    pub fn reframe(&mut self, correction: &Pose2) {
+        if let Some(last) = &mut self.last {
+            *last = correction.compose(last);
         }
     }
 
