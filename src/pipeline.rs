@@ -246,6 +246,9 @@ pub struct OfflineMapper {
     /// only at the end), and whether one is waiting.
     defer_cls_rebuild: bool,
     cls_stale: bool,
+    /// The kept keyframe the latest keyframe was merged into, if it was:
+    /// the anchor of the scans after it until a keyframe is kept.
+    anchor_keyframe: Option<usize>,
     summary: MappingSummary,
     clocks: [StageClock; 6],
 }
@@ -274,6 +277,7 @@ impl OfflineMapper {
             graph: KeyframeGraph::new(),
             defer_cls_rebuild: false,
             cls_stale: false,
+            anchor_keyframe: None,
             summary: MappingSummary::default(),
             clocks: [StageClock::default(); 6],
         }
@@ -625,6 +629,7 @@ impl OfflineMapper {
                     outcome.localized || first,
                     &self.config.loop_closure,
                 );
+                self.anchor_keyframe = None;
                 let closed = self.graph.close_loop(
                     &self.config.map,
                     &self.config.localizer,
@@ -638,7 +643,10 @@ impl OfflineMapper {
                         outcome.pose = correction.correction.compose(&outcome.pose);
                     }
                     Ok(None) => {
-                        self.graph.merge_revisit(&self.config.loop_closure);
+                        // Scans until the next kept keyframe hang on the
+                        // one this revisit was merged into, not on the last
+                        // kept one, which may be far back along the path.
+                        self.anchor_keyframe = self.graph.merge_revisit(&self.config.loop_closure);
                     }
                     Err(e) => warn!(t = record.scan.t, "pose graph not optimised: {e}"),
                 }
@@ -655,9 +663,9 @@ impl OfflineMapper {
             }
         }
         self.trajectory.push((record.scan.t, outcome.pose));
-        let newest = self.graph.len().checked_sub(1);
+        let anchor = self.anchor_keyframe.or(self.graph.len().checked_sub(1));
         self.anchors
-            .push(newest.map(|k| (k, self.graph.poses()[k].between(&outcome.pose))));
+            .push(anchor.map(|k| (k, self.graph.poses()[k].between(&outcome.pose))));
         self.summary.scans += 1;
         self.clocks[WHOLE].add(started.elapsed());
         outcome

@@ -233,13 +233,12 @@ impl KeyframeGraph {
     /// agrees with the graph (added as an edge or not) and a kept keyframe
     /// at least `cfg.min_travel` of path back lies within
     /// `cfg.revisit_distance` and `cfg.revisit_angle`: that place is in the
-    /// map already. Returns whether it was dropped.
-    pub fn merge_revisit(&mut self, cfg: &LoopClosureConfig) -> bool {
-        let Some(newest) = self.keyframes.len().checked_sub(1) else {
-            return false;
-        };
+    /// map already. Returns the kept keyframe it was merged into (the
+    /// nearest such), if it was dropped.
+    pub fn merge_revisit(&mut self, cfg: &LoopClosureConfig) -> Option<usize> {
+        let newest = self.keyframes.len().checked_sub(1)?;
         if !self.newest_agrees {
-            return false;
+            return None;
         }
         let poses = self.graph.poses();
         let b = poses[newest];
@@ -248,14 +247,15 @@ impl KeyframeGraph {
             .keyframes
             .iter()
             .zip(poses)
-            .take_while(|(k, _)| k.travelled <= limit)
-            .any(|(_, a)| {
+            .enumerate()
+            .take_while(|(_, (k, _))| k.travelled <= limit)
+            .filter(|(_, (_, a))| {
                 (a.x - b.x).hypot(a.y - b.y) <= cfg.revisit_distance
                     && crate::geometry::wrap_angle(a.theta - b.theta).abs() <= cfg.revisit_angle
-            });
-        if !near {
-            return false;
-        }
+            })
+            .map(|(j, (_, a))| (j, (a.x - b.x).hypot(a.y - b.y)))
+            .min_by(|x, y| x.1.total_cmp(&y.1))
+            .map(|(j, _)| j)?;
         let had_loop = self
             .graph
             .edges()
@@ -269,7 +269,7 @@ impl KeyframeGraph {
             self.last_loop_keyframe = None;
         }
         self.stats.revisits_merged += 1;
-        true
+        Some(near)
     }
 
     /// Optimises once more if loop edges came in since the last
