@@ -2,6 +2,7 @@
 //! frame → fusion of actual segments → region union).
 
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
@@ -21,6 +22,31 @@ use super::region::{
 use super::shapes::{group_loops, to_shapes, whole_contours};
 use super::store::{StoreError, load_items, save_items};
 use super::window::Window;
+
+/// A multiply–rotate hasher for the exact bit patterns of segment end
+/// points: the candidate check hashes every segment near each update, and
+/// SipHash's defence against chosen keys (which map data are not) cost a
+/// tenth of a whole CSAIL run.
+#[derive(Debug, Default)]
+struct BitsHasher(u64);
+
+impl Hasher for BitsHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for chunk in bytes.chunks(8) {
+            let mut word = [0u8; 8];
+            word[..chunk.len()].copy_from_slice(chunk);
+            self.write_u64(u64::from_le_bytes(word));
+        }
+    }
+
+    fn write_u64(&mut self, v: u64) {
+        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
 
 /// Refuses a pose or covariance that is not finite.
 fn check_pose(pose: &Pose2, pose_cov: &[[f64; 3]; 3]) -> Result<(), ClsError> {
@@ -399,7 +425,8 @@ impl ClsMap {
             ]
         };
         // Counted, so a segment the update duplicated is not taken for old.
-        let mut before: HashMap<[u64; 4], usize> = HashMap::new();
+        let mut before: HashMap<[u64; 4], usize, BuildHasherDefault<BitsHasher>> =
+            HashMap::default();
         for &i in touched.iter().chain(&untouched) {
             for l in self.shapes[i].loops() {
                 for seg in l.segments() {
