@@ -9,7 +9,7 @@
 //! them, in a minimum-degree order computed here over the blocks (its own
 //! Cholesky does no fill-reducing ordering, and a floor driven round many
 //! times fills in badly in keyframe order). A 1,000-keyframe graph with
-//! 330 loop edges optimises in about 18 ms (`benches/loop_closure.rs`);
+//! 331 loop edges optimises in about 17 ms (`benches/loop_closure.rs`);
 //! the factor-graph crates (factrs, apex-solver) bring 100–230 crates for
 //! the same Gauss–Newton step.
 //!
