@@ -191,3 +191,65 @@ fn bad_edges_are_refused() {
     g.add_edge(e).unwrap();
     assert_eq!(g.edges().len(), 1);
 }
+
+mod properties {
+    use super::*;
+    use proptest::prelude::*;
+
+    prop_compose! {
+        /// Steps of up to 1 m and 0.6 rad.
+        fn steps(max: usize)(v in prop::collection::vec((-1.0..1.0f64, -1.0..1.0f64, -0.6..0.6f64), 3..max)) -> Vec<Pose2> {
+            v.into_iter().map(|(x, y, t)| Pose2::new(x, y, t)).collect()
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+
+        /// Exact edges (chain and loops) from a true trajectory: whatever
+        /// the start (the truth bent by a drift), the optimiser returns the
+        /// truth, the first pose fixed.
+        #[test]
+        fn consistent_edges_give_back_the_truth(
+            steps in steps(40),
+            loops in prop::collection::vec((0usize..40, 0usize..40), 1..6),
+            drift in -0.02..0.02f64,
+        ) {
+            let mut truth = vec![Pose2::IDENTITY];
+            for s in &steps {
+                let next = truth.last().unwrap().compose(s);
+                truth.push(next);
+            }
+            let n = truth.len();
+            let mut g = PoseGraph::new();
+            let mut p = truth[0];
+            g.add_pose(p);
+            for (k, s) in steps.iter().enumerate() {
+                // The start: dead reckoning with a heading drift per step.
+                p = p.compose(&Pose2::new(s.x, s.y, s.theta + drift));
+                g.add_pose(p);
+                g.add_edge(Edge {
+                    from: k,
+                    to: k + 1,
+                    measurement: *s,
+                    information: chain_info(),
+                    kind: EdgeKind::Chain,
+                })
+                .unwrap();
+            }
+            for (a, b) in loops {
+                let (a, b) = (a % n, b % n);
+                if a.abs_diff(b) < 2 {
+                    continue;
+                }
+                g.add_edge(loop_edge(&truth, a.min(b), a.max(b))).unwrap();
+            }
+            g.optimize(&OptimizerConfig::default()).unwrap();
+            prop_assert_eq!(g.poses()[0], Pose2::IDENTITY);
+            for (est, t) in g.poses().iter().zip(&truth) {
+                prop_assert!((est.x - t.x).hypot(est.y - t.y) < 1e-5, "{:?} vs {:?}", est, t);
+                prop_assert!(wrap_angle(est.theta - t.theta).abs() < 1e-6);
+            }
+        }
+    }
+}
