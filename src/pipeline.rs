@@ -249,6 +249,8 @@ pub struct OfflineMapper {
     /// The kept keyframe the latest keyframe was merged into, if it was:
     /// the anchor of the scans after it until a keyframe is kept.
     anchor_keyframe: Option<usize>,
+    /// Whether the previous scan's fix was refused as an implausible jump.
+    previous_refused_jump: bool,
     summary: MappingSummary,
     clocks: [StageClock; 6],
 }
@@ -278,6 +280,7 @@ impl OfflineMapper {
             defer_cls_rebuild: false,
             cls_stale: false,
             anchor_keyframe: None,
+            previous_refused_jump: false,
             summary: MappingSummary::default(),
             clocks: [StageClock::default(); 6],
         }
@@ -468,6 +471,26 @@ impl OfflineMapper {
                 outcome.by_previous_scan = true;
                 Ok(fix)
             }
+            // The previous scan's fix was refused as too large a jump too:
+            // the lines keep asking for the same big correction, so the
+            // odometry is what is wrong (a lagging heading in a fast turn
+            // between sparse scans). Accepted at twice the limits, so one
+            // odd scan still cannot move the pose that far.
+            Err(LocalizeError::ImplausibleJump { .. }) if self.previous_refused_jump => {
+                let wide = crate::localize::LocalizerConfig {
+                    max_translation_jump: 2.0 * cfg.max_translation_jump,
+                    max_rotation_jump: 2.0 * cfg.max_rotation_jump,
+                    ..*cfg
+                };
+                localize(
+                    &self.lines,
+                    self.map.index(),
+                    predicted,
+                    predicted_cov,
+                    &wide,
+                )
+                .map_err(Rejection::Localize)
+            }
             other => other.map_err(Rejection::Localize),
         }
     }
@@ -545,6 +568,10 @@ impl OfflineMapper {
             let result = trace_span!("localize")
                 .in_scope(|| self.localize_with_fallback(predicted, &predicted_cov, &mut outcome));
             self.clocks[LOCALIZE].add(t.elapsed());
+            self.previous_refused_jump = matches!(
+                result,
+                Err(Rejection::Localize(LocalizeError::ImplausibleJump { .. }))
+            );
             let result = result.and_then(|fix| {
                 let sigmas = mahalanobis(&fix.pose, &predicted, &predicted_cov);
                 if sigmas > self.config.max_correction_sigmas {
@@ -656,7 +683,11 @@ impl OfflineMapper {
         }
 
         self.predictor.record(outcome.pose, cov, outcome.localized);
-        if self.config.previous_scan_fallback {
+        // The fallback reference follows the map's rule: a scan at a
+        // doubtful pose (a refused fix) does not become the reference the
+        // next scan is matched against, or the next scan would agree with
+        // the doubt; the last trusted scan stays the reference.
+        if self.config.previous_scan_fallback && may_update_map {
             self.previous_scan = SegmentIndex::new();
             for line in &self.lines {
                 self.previous_scan.insert(line.transformed(&outcome.pose));
@@ -828,6 +859,49 @@ mod tests {
         assert_eq!(out.pose, Pose2::IDENTITY);
         assert!(out.keyframe && !out.localized);
         assert!(mapper.map().len() >= 3, "{} segments", mapper.map().len());
+    }
+
+    /// The odometry reports a 23° turn the robot did not make (a heading
+    /// that lags in a fast turn, then catches up): the 22° correction is
+    /// more than the localizer takes from one scan, so it is refused; the
+    /// next scan asks for the same correction and it is taken.
+    #[test]
+    fn a_correction_asked_for_twice_in_a_row_is_taken() {
+        let world = World::room_with_boxes();
+        let spec = ScanSpec::lms200_half_degree(0.0);
+        let mut rng = Rng::new(4);
+        let mut mapper = OfflineMapper::new(MapperConfig::default());
+        let mut feed = |k: usize, truth: Pose2, odometry: Pose2| {
+            let scan = cast_scan(&world, &truth, &spec, 0.2 * k as f64, &mut rng);
+            mapper.process(&ScanRecord {
+                scan,
+                odometry: Some(odometry),
+            })
+        };
+        let start = Pose2::new(3.0, 3.0, 0.2);
+        feed(0, start, Pose2::IDENTITY);
+        feed(
+            1,
+            start.compose(&Pose2::new(0.01, 0.0, 0.0)),
+            Pose2::new(0.01, 0.0, 0.0),
+        );
+        let moved = Pose2::new(0.02, 0.0, 0.02);
+        let truth = start.compose(&moved);
+        let first = feed(2, truth, Pose2::new(0.02, 0.0, 0.4));
+        assert_eq!(
+            first.rejection.as_deref(),
+            Some("ImplausibleJump"),
+            "{first:?}"
+        );
+        let moved = Pose2::new(0.03, 0.0, 0.02);
+        let truth = start.compose(&moved);
+        let second = feed(3, truth, Pose2::new(0.03, 0.0, 0.4));
+        assert!(second.localized, "{second:?}");
+        assert!(
+            wrap_angle(second.pose.theta - moved.theta).abs() < 0.01
+                && (second.pose.x - moved.x).hypot(second.pose.y - moved.y) < 0.02,
+            "{second:?} vs {moved:?}"
+        );
     }
 
     #[test]
