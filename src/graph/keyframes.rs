@@ -3,7 +3,7 @@
 //! keyframe order whenever a loop closure moves the poses.
 
 use std::collections::BTreeMap;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use serde::Serialize;
 use tracing::{debug, trace_span};
@@ -337,10 +337,5 @@ impl KeyframeGraph {
         }
         self.stats.rebuild_s += started.elapsed().as_secs_f64();
         (cls, refused)
-    }
-
-    /// Time spent in loop closure so far.
-    pub fn time(&self) -> Duration {
-        Duration::from_secs_f64(self.stats.search_s + self.stats.optimise_s + self.stats.rebuild_s)
     }
 }
