@@ -2,11 +2,12 @@
 //! et al. relations, beside the logged odometry's score.
 //!
 //! ```text
-//! cargo run --release --example csail_mapping -- [CONFIG.toml] [--scans N] [--out DIR] [--trace]
+//! cargo run --release --example csail_mapping -- [CONFIG.toml] [--log LOG.clf] [--scans N] [--out DIR] [--trace]
 //! cargo run --release --example csail_mapping -- config/csail.toml
 //! ```
 //! The log and relations are read from `../shared/datasets/mit-csail/`
-//! relative to the crate. `--trace` prints one line per scan: whether it
+//! relative to the crate (`--log` takes another recording of the same run,
+//! such as a thinned copy from `scripts/sparse_carmen.py`). `--trace` prints one line per scan: whether it
 //! was localized, degenerate, a keyframe, and its estimated step beside the
 //! odometry step (the basis of the odometry latency estimate in
 //! `config/csail.toml`).
@@ -38,18 +39,18 @@ fn main() -> Result<(), Box<dyn Error>> {
     let mut limit = usize::MAX;
     let mut out: Option<PathBuf> = None;
     let mut trace = false;
+    let mut log = dir.join("mit-csail.clf");
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--scans" => limit = args.next().ok_or("--scans needs a number")?.parse()?,
             "--trace" => trace = true,
+            "--log" => log = args.next().ok_or("--log needs a file")?.into(),
             "--out" => out = Some(args.next().ok_or("--out needs a directory")?.into()),
             path => config = MapperConfig::from_toml(&std::fs::read_to_string(path)?)?,
         }
     }
-    let records: Vec<ScanRecord> = open_log(&dir.join("mit-csail.clf"))?
-        .take(limit)
-        .collect::<Result<_, _>>()?;
+    let records: Vec<ScanRecord> = open_log(&log)?.take(limit).collect::<Result<_, _>>()?;
     let relations = read_relations(std::io::BufReader::new(std::fs::File::open(
         dir.join("mit-csail.relations"),
     )?))?;

@@ -23,7 +23,9 @@ use crate::geometry::{CogLine, LineExtractor, Pose2, wrap_angle};
 use crate::graph::{Correction, KeyframeGraph, LoopStats};
 use crate::input::{InputError, ScanRecord, open_log};
 use crate::localize::global::GlobalConfig;
-use crate::localize::{LocalizationResult, LocalizeError, SegmentIndex, localize};
+use crate::localize::{
+    LocalizationResult, LocalizeError, SegmentIndex, localize, localize_searching_heading,
+};
 use crate::map::cls::{ClsError, ClsMap, local_region, picture};
 use crate::map::{Keyframe, KeyframePolicy, SegmentMap, SegmentMapFile};
 use crate::mapping_config::MapperConfig;
@@ -456,11 +458,17 @@ impl OfflineMapper {
         outcome: &mut ScanOutcome,
     ) -> Result<LocalizationResult, Rejection> {
         let cfg = &self.config.localizer;
-        match localize(&self.lines, self.map.index(), predicted, predicted_cov, cfg) {
+        match localize_searching_heading(
+            &self.lines,
+            self.map.index(),
+            predicted,
+            predicted_cov,
+            cfg,
+        ) {
             Err(LocalizeError::TooFewMatches { .. })
                 if self.config.previous_scan_fallback && !self.previous_scan.is_empty() =>
             {
-                let fix = localize(
+                let fix = localize_searching_heading(
                     &self.lines,
                     &self.previous_scan,
                     predicted,

@@ -180,6 +180,25 @@ impl SegmentIndex {
         self.live == 0
     }
 
+    /// The stored lines whose bounding boxes come within `radius` (m) of
+    /// `centre`, in no particular order.
+    pub fn near(&self, centre: [f64; 2], radius: f64) -> impl Iterator<Item = &CogLine> + '_ {
+        let query = (centre.iter().all(|v| v.is_finite()) && radius.is_finite()).then(|| {
+            BvhNode::leaf(
+                Aabb::new(
+                    Vector::new(centre[0] - radius, centre[1] - radius),
+                    Vector::new(centre[0] + radius, centre[1] + radius),
+                ),
+                0,
+            )
+        });
+        query
+            .map(move |q| self.bvh.leaves(move |node: &BvhNode| node.intersects(&q)))
+            .into_iter()
+            .flatten()
+            .filter_map(move |leaf| self.lines.get(leaf as usize)?.as_ref())
+    }
+
     /// Ids of the map lines that correspond to `line` (same frame) under
     /// `cfg`, in no particular order.
     pub fn candidates<'a>(

@@ -96,6 +96,11 @@ pub struct LocalizerConfig {
     /// it. Default 3: a row at 3σ
     /// keeps half its weight, one at 30σ a hundredth.
     pub robust_kernel_scale: f64,
+    /// When nothing matches, this many headings are tried that would bring
+    /// local lines onto map lines (see [`super::heading`]); 0 disables.
+    /// Default 3: odometry headings lag in fast turns by more than any
+    /// noise model admits without widening every gate.
+    pub heading_search: usize,
 }
 
 impl Default for LocalizerConfig {
@@ -116,6 +121,7 @@ impl Default for LocalizerConfig {
             scale_covariance_by_residual: true,
             validation_gate_sigmas: 4.0,
             robust_kernel_scale: 3.0,
+            heading_search: 3,
         }
     }
 }
@@ -246,6 +252,15 @@ fn prior_information(prior: &[[f64; 3]; 3]) -> Result<Matrix3<f64>, LocalizeErro
     Ok(chol.inverse())
 }
 
+/// Largest heading correction (rad) accepted for a prediction with
+/// covariance `prior`: `max_rotation_jump`, or as many of the prediction's
+/// own σ as the gates let matches through when that is wider (a long, fast
+/// turn between sparse scans).
+pub(crate) fn rotation_limit(prior: &[[f64; 3]; 3], cfg: &LocalizerConfig) -> f64 {
+    cfg.max_rotation_jump
+        .max(cfg.gate_sigmas * prior[2][2].max(0.0).sqrt())
+}
+
 /// Localizes the robot: `local_lines` in the robot frame, `map` in the map
 /// frame, `predicted` the odometry prediction with covariance `prior`
 /// (x, y, θ). See the module documentation for the method.
@@ -318,13 +333,7 @@ pub fn localize(
 
     let dx = (pose.x - predicted.x).hypot(pose.y - predicted.y);
     let dtheta = wrap_angle(pose.theta - predicted.theta).abs();
-    // A prediction that is itself this uncertain (a long, fast turn between
-    // sparse scans) may be corrected by as many of its σ as the gates let
-    // matches through.
-    let rotation_limit = cfg
-        .max_rotation_jump
-        .max(cfg.gate_sigmas * prior[2][2].max(0.0).sqrt());
-    if dx > cfg.max_translation_jump || dtheta > rotation_limit {
+    if dx > cfg.max_translation_jump || dtheta > rotation_limit(prior, cfg) {
         return Err(LocalizeError::ImplausibleJump { dx, dtheta });
     }
     Ok(LocalizationResult {

@@ -2,6 +2,7 @@
 
 pub mod correspond;
 pub mod global;
+pub mod heading;
 pub mod local;
 mod problem;
 mod solve;
@@ -9,5 +10,6 @@ mod solve;
 pub use correspond::{
     CorrespondenceConfig, SegmentId, SegmentIndex, lines_correspond, match_score,
 };
+pub use heading::localize_searching_heading;
 pub use local::{LocalizationResult, LocalizeError, LocalizerConfig, localize};
 pub use solve::LineConstraints;

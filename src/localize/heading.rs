@@ -1,0 +1,243 @@
+//! Heading search: local localization for a prediction whose heading is
+//! off by more than its covariance admits.
+//!
+//! Odometry headings lag in fast turns: between scans 0.7 m apart, logged
+//! odometry was seen 10–20° off in a 10° turn, while its noise model
+//! allowed 3°. No line then falls inside the correspondence gates, and
+//! local localization finds nothing to match, scan after scan, while the
+//! heading error goes into the map.
+//!
+//! A rotation about the robot keeps each line's distance from the robot
+//! and its placement along itself, and turns only its direction. So every
+//! pair of a local line and a map line with about the same distance and an
+//! overlapping placement votes for the rotation that aligns them, weighted
+//! by the length they share; the best-supported rotations (apart from the
+//! prediction's own, which failed) are tried as new predictions, and the
+//! fix with the most matches wins. The result must still lie within the
+//! localizer's jump limits of the original prediction.
+
+use super::correspond::SegmentIndex;
+use super::local::{LocalizationResult, LocalizeError, LocalizerConfig, localize, rotation_limit};
+use crate::geometry::{CogLine, Pose2, wrap_angle};
+
+/// Rotations (rad) about `predicted`'s position that would bring
+/// `local` lines (robot frame) onto `map` lines, best supported first: at
+/// most `tries`, each at least `separation` from the others and from 0,
+/// none beyond `limit`. A pair votes when the lines' distances from the
+/// robot differ by at most `tolerance` (m) and their placements along
+/// themselves overlap with that much slack.
+pub fn heading_candidates(
+    local: &[CogLine],
+    map: &SegmentIndex,
+    predicted: &Pose2,
+    limit: f64,
+    tolerance: f64,
+    separation: f64,
+    tries: usize,
+) -> Vec<f64> {
+    let robot = [predicted.x, predicted.y];
+    let reach = local
+        .iter()
+        .flat_map(|l| [l.start, l.end])
+        .map(|p| p[0].hypot(p[1]))
+        .fold(0.0, f64::max)
+        + tolerance;
+    let nearby: Vec<&CogLine> = map.near(robot, reach).collect();
+    let mut votes: Vec<(f64, f64)> = Vec::new();
+    for l in local {
+        let d_local = l.signed_distance([0.0, 0.0]);
+        let a = l.along([0.0, 0.0]);
+        let (lo, hi) = l.extent();
+        let (l_lo, l_hi) = (lo - a, hi - a);
+        for m in &nearby {
+            let rotation = wrap_angle(m.theta - l.theta - predicted.theta);
+            if rotation.abs() > limit || (m.signed_distance(robot) - d_local).abs() > tolerance {
+                continue;
+            }
+            let b = m.along(robot);
+            let (lo, hi) = m.extent();
+            let shared = l_hi.min(hi - b) - l_lo.max(lo - b) + tolerance;
+            if shared > 0.0 {
+                votes.push((rotation, shared.min(l.length()).min(m.length())));
+            }
+        }
+    }
+    // Support of each vote's rotation: the weight within half a
+    // separation of it, and their weighted mean.
+    let half = 0.5 * separation;
+    let mut supported: Vec<(f64, f64)> = votes
+        .iter()
+        .map(|&(r, _)| {
+            let (w, wr) = votes
+                .iter()
+                .filter(|(q, _)| (q - r).abs() <= half)
+                .fold((0.0, 0.0), |(w, wr), &(q, v)| (w + v, wr + v * q));
+            (w, wr / w)
+        })
+        .collect();
+    supported.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.total_cmp(&b.1)));
+    let mut chosen: Vec<f64> = Vec::new();
+    for (_, r) in supported {
+        if chosen.len() >= tries {
+            break;
+        }
+        if r.abs() >= half && chosen.iter().all(|c| (c - r).abs() >= separation) {
+            chosen.push(r);
+        }
+    }
+    chosen
+}
+
+/// [`localize`], and when it finds too few matches, again from the
+/// prediction turned by each of [`heading_candidates`]
+/// (`cfg.heading_search` of them): the fix with the most matches (then
+/// the lowest χ²) whose jump from `predicted` is within the limits, or the
+/// first error. A searched heading needs one match more than
+/// `cfg.min_matches`, since it was chosen to make lines match.
+pub fn localize_searching_heading(
+    local: &[CogLine],
+    map: &SegmentIndex,
+    predicted: Pose2,
+    prior: &[[f64; 3]; 3],
+    cfg: &LocalizerConfig,
+) -> Result<LocalizationResult, LocalizeError> {
+    let first = localize(local, map, predicted, prior, cfg);
+    if cfg.heading_search == 0 || !matches!(first, Err(LocalizeError::TooFewMatches { .. })) {
+        return first;
+    }
+    let limit = rotation_limit(prior, cfg);
+    let tolerance = cfg.correspondence.max_centre_distance
+        + cfg.gate_sigmas * prior[0][0].max(prior[1][1]).max(0.0).sqrt();
+    let candidates = heading_candidates(
+        local,
+        map,
+        &predicted,
+        limit,
+        tolerance.min(cfg.max_translation_jump),
+        cfg.correspondence.max_angle_diff,
+        cfg.heading_search,
+    );
+    let mut best: Option<LocalizationResult> = None;
+    for rotation in candidates {
+        let start = Pose2::new(predicted.x, predicted.y, predicted.theta + rotation);
+        let Ok(fix) = localize(local, map, start, prior, cfg) else {
+            continue;
+        };
+        let dx = (fix.pose.x - predicted.x).hypot(fix.pose.y - predicted.y);
+        let dtheta = wrap_angle(fix.pose.theta - predicted.theta).abs();
+        if fix.matches.len() <= cfg.min_matches || dx > cfg.max_translation_jump || dtheta > limit {
+            continue;
+        }
+        let better = best.as_ref().is_none_or(|b| {
+            fix.matches.len() > b.matches.len()
+                || (fix.matches.len() == b.matches.len() && fix.chi2 < b.chi2)
+        });
+        if better {
+            best = Some(fix);
+        }
+    }
+    best.ok_or_else(|| first.err().unwrap_or(LocalizeError::Singular))
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use std::f64::consts::FRAC_PI_2;
+
+    fn line(theta: f64, c: [f64; 2], half: f64) -> CogLine {
+        CogLine::from_centre(theta, c, -half, half, 0.003, 0.002, 60)
+    }
+
+    /// An L-shaped corner and a far wall (robot frame), and the map of them
+    /// with the robot at `truth`.
+    fn corner(truth: &Pose2) -> (Vec<CogLine>, SegmentIndex) {
+        let local = vec![
+            line(FRAC_PI_2, [4.0, 0.5], 2.0),
+            line(std::f64::consts::PI, [1.5, 2.5], 2.5),
+            line(0.0, [2.0, -1.8], 2.0),
+        ];
+        let mut map = SegmentIndex::new();
+        for l in &local {
+            map.insert(l.transformed(truth));
+        }
+        (local, map)
+    }
+
+    const PRIOR: [[f64; 3]; 3] = [[0.0004, 0.0, 0.0], [0.0, 0.0004, 0.0], [0.0, 0.0, 0.0009]];
+
+    #[test]
+    fn a_heading_far_outside_the_prior_is_found_and_fixed() {
+        let truth = Pose2::new(3.0, 1.0, 0.5);
+        let (local, map) = corner(&truth);
+        // 17° off, where the prior's σ is 1.7°: the gates let nothing in.
+        let predicted = Pose2::new(3.02, 0.99, 0.5 - 0.3);
+        let cfg = LocalizerConfig {
+            max_rotation_jump: 0.35,
+            ..LocalizerConfig::default()
+        };
+        assert!(matches!(
+            localize(&local, &map, predicted, &PRIOR, &cfg),
+            Err(LocalizeError::TooFewMatches { .. })
+        ));
+        let candidates = heading_candidates(&local, &map, &predicted, 0.35, 0.3, 0.087, 3);
+        assert!((candidates[0] - 0.3).abs() < 0.01, "{candidates:?}");
+        let fix = localize_searching_heading(&local, &map, predicted, &PRIOR, &cfg).unwrap();
+        assert_eq!(fix.matches.len(), 3);
+        assert!(
+            wrap_angle(fix.pose.theta - truth.theta).abs() < 1e-3,
+            "{:?}",
+            fix.pose
+        );
+        assert!(
+            (fix.pose.x - truth.x).hypot(fix.pose.y - truth.y) < 0.01,
+            "{:?}",
+            fix.pose
+        );
+    }
+
+    #[test]
+    fn no_search_beyond_the_rotation_limit_or_when_disabled() {
+        let truth = Pose2::new(3.0, 1.0, 0.5);
+        let (local, map) = corner(&truth);
+        let predicted = Pose2::new(3.0, 1.0, 0.5 - 0.6);
+        let cfg = LocalizerConfig::default();
+        assert!(matches!(
+            localize_searching_heading(&local, &map, predicted, &PRIOR, &cfg),
+            Err(LocalizeError::TooFewMatches { .. })
+        ));
+        let predicted = Pose2::new(3.0, 1.0, 0.5 - 0.3);
+        let off = LocalizerConfig {
+            heading_search: 0,
+            ..cfg
+        };
+        assert!(localize_searching_heading(&local, &map, predicted, &PRIOR, &off).is_err());
+    }
+
+    #[test]
+    fn lines_at_other_distances_do_not_vote() {
+        let truth = Pose2::new(0.0, 0.0, 0.0);
+        let (local, _) = corner(&truth);
+        // The same directions, every wall a metre farther away.
+        let mut map = SegmentIndex::new();
+        for l in &local {
+            let n = l.normal();
+            let mut moved = *l;
+            moved.xc -= n[0];
+            moved.yc -= n[1];
+            moved.start = [l.start[0] - n[0], l.start[1] - n[1]];
+            moved.end = [l.end[0] - n[0], l.end[1] - n[1]];
+            map.insert(moved.transformed(&Pose2::new(0.0, 0.0, 0.2)));
+        }
+        let candidates = heading_candidates(
+            &local,
+            &map,
+            &Pose2::new(0.0, 0.0, 0.0),
+            0.35,
+            0.3,
+            0.087,
+            3,
+        );
+        assert!(candidates.is_empty(), "{candidates:?}");
+    }
+}
