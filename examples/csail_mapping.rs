@@ -65,6 +65,8 @@ fn main() -> Result<(), Box<dyn Error>> {
         .filter_map(|r| Some((r.scan.t, r.odometry?)))
         .collect();
     let mut mapper = OfflineMapper::new(config);
+    // As `clsmap map` runs it: the CLS map built once, at the end.
+    mapper.defer_cls_rebuild();
     let t0 = records.first().map_or(0.0, |r| r.scan.t);
     let mut prev: Option<(clsmap::geometry::Pose2, clsmap::geometry::Pose2)> = None;
     for r in &records {
@@ -96,6 +98,7 @@ fn main() -> Result<(), Box<dyn Error>> {
             prev = Some((o.pose, odo));
         }
     }
+    mapper.finish();
     let summary = mapper.summary();
     println!(
         "{} scans, {} relations in span",

@@ -55,6 +55,13 @@ pub struct OdometryNoise {
     pub missing_translation: f64,
     /// Rotation σ of a scan without usable odometry (rad). Default 0.15.
     pub missing_rotation: f64,
+    /// Widest factor on the heading σ learnt from how far localization
+    /// corrects the odometry's heading (the running mean of the squared
+    /// corrections against the model's variance over about 30 scans);
+    /// 1 keeps the model as written. Default 3: a robot's odometry may be
+    /// worse than these defaults, and a heading σ too narrow lets no line
+    /// through the gates.
+    pub max_heading_scale: f64,
 }
 
 impl Default for OdometryNoise {
@@ -68,6 +75,7 @@ impl Default for OdometryNoise {
             min_rotation: 0.005,
             missing_translation: 0.3,
             missing_rotation: 0.15,
+            max_heading_scale: 3.0,
         }
     }
 }
@@ -315,6 +323,7 @@ impl MapperConfig {
         v.check(x, "min_rotation", o.min_rotation, Positive)?;
         v.check(x, "missing_translation", o.missing_translation, Positive)?;
         v.check(x, "missing_rotation", o.missing_rotation, Positive)?;
+        v.check(x, "max_heading_scale", o.max_heading_scale, AtLeast(1.0))?;
         v.check("cls", "point_tolerance", c.point_tolerance, NonNegative)?;
         v.check("cls", "max_wedge", c.max_wedge, Wedge)?;
         v.check("cls.region", "grid", c.region.grid, Positive)?;

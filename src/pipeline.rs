@@ -176,6 +176,12 @@ pub struct MappingSummary {
     /// Scans whose odometry equalled the previous scan's (standing still,
     /// or odometry frozen); predicted at constant velocity.
     pub scans_with_unchanged_odometry: usize,
+    /// Factor on the odometry's heading σ learnt at the end of the run
+    /// (1: the noise model fits; see `OdometryNoise::max_heading_scale`).
+    pub odometry_heading_scale: f64,
+    /// Scans localized from a searched heading because nothing matched
+    /// from the odometry's (see `LocalizerConfig::heading_search`).
+    pub heading_searches: usize,
     /// Loop closure: searches, loops accepted and rejected, optimisations.
     pub loops: LoopStats,
     pub mean_time: StageTimes,
@@ -368,6 +374,7 @@ impl OfflineMapper {
         s.cls_virtual = self.cls.virtual_segments().count();
         s.cls_loops = self.cls.loops().count();
         s.loops = self.graph.stats().clone();
+        s.odometry_heading_scale = self.predictor.heading_scale(&self.config.odometry);
         s.mean_time = StageTimes {
             predict_us: self.clocks[PREDICT].mean_us(),
             extract_us: self.clocks[EXTRACT].mean_us(),
@@ -590,6 +597,8 @@ impl OfflineMapper {
             });
             match result {
                 Ok(fix) => {
+                    self.predictor.observe_heading(fix.pose.theta);
+                    self.summary.heading_searches += usize::from(fix.heading_searched);
                     outcome.pose = fix.pose;
                     outcome.localized = true;
                     outcome.degenerate = fix.degenerate.is_some();

@@ -59,6 +59,10 @@ pub fn map(
         summary.rejected_localizations, summary.rejections_by_kind
     );
     println!(
+        "  odometry heading:           σ ×{:.2} of the model (learnt); {} scans localized from a searched heading",
+        summary.odometry_heading_scale, summary.heading_searches
+    );
+    println!(
         "  mean time per scan:         {:.1} µs (extraction {:.1}, localization {:.1}; per keyframe: segment map {:.1}, CLS map {:.1})",
         t.per_scan_us, t.extract_us, t.localize_us, t.map_update_us, t.cls_update_us
     );

@@ -133,7 +133,10 @@ pub fn localize_searching_heading(
                 || (fix.matches.len() == b.matches.len() && fix.chi2 < b.chi2)
         });
         if better {
-            best = Some(fix);
+            best = Some(LocalizationResult {
+                heading_searched: true,
+                ..fix
+            });
         }
     }
     best.ok_or_else(|| first.err().unwrap_or(LocalizeError::Singular))
@@ -184,6 +187,7 @@ mod tests {
         assert!((candidates[0] - 0.3).abs() < 0.01, "{candidates:?}");
         let fix = localize_searching_heading(&local, &map, predicted, &PRIOR, &cfg).unwrap();
         assert_eq!(fix.matches.len(), 3);
+        assert!(fix.heading_searched);
         assert!(
             wrap_angle(fix.pose.theta - truth.theta).abs() < 1e-3,
             "{:?}",

@@ -6,7 +6,8 @@
 //! - `localize(local_lines: &[CogLine] /* robot frame */, map: &SegmentIndex,
 //!    predicted: Pose2, prior: &[[f64; 3]; 3] /* covariance of predicted, x y θ */,
 //!    cfg: &LocalizerConfig) -> Result<LocalizationResult, LocalizeError>`.
-//! - `LocalizationResult { pose, covariance, matches, degenerate, iterations, chi2 }`.
+//! - `LocalizationResult { pose, covariance, matches, degenerate, iterations, chi2,
+//!    heading_searched }`.
 //! - `LocalizeError`: `TooFewMatches`, `ImplausibleJump`, `InvalidPrior`,
 //!   `NonFiniteInput`, `Singular`, `NotConverged`.
 //!
@@ -142,6 +143,9 @@ pub struct LocalizationResult {
     pub iterations: usize,
     /// Weighted squared residual of the line constraints at the solution.
     pub chi2: f64,
+    /// Whether the solution started from a searched heading, not the
+    /// prediction's (see [`super::heading`]).
+    pub heading_searched: bool,
 }
 
 /// Why localization gave no pose.
@@ -343,6 +347,7 @@ pub fn localize(
         degenerate,
         iterations,
         chi2: lines.chi2,
+        heading_searched: false,
     })
 }
 

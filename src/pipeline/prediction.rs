@@ -139,6 +139,64 @@ pub struct Prediction {
     pub from_odometry: bool,
 }
 
+/// How much worse the odometry's heading is than its noise model says,
+/// learnt from the scans localization corrected: the running mean of the
+/// squared heading corrections over the running mean of the variances the
+/// model predicted for them. A model that fits gives about 1; logged
+/// odometry whose heading lags in turns gave several times that, and its
+/// too-narrow gates then let no line match.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeadingFit {
+    squared_error: f64,
+    model_variance: f64,
+    samples: usize,
+}
+
+impl HeadingFit {
+    /// Weight of the newest scan in the running means: about the last 30.
+    const RATE: f64 = 1.0 / 30.0;
+    /// Scans before the fit is used.
+    const WARM_UP: usize = 10;
+    /// One correction counts as at most this many model σ (a wrong fix
+    /// should not widen every later gate by itself).
+    const CLIP_SIGMAS: f64 = 5.0;
+
+    const fn new() -> Self {
+        HeadingFit {
+            squared_error: 0.0,
+            model_variance: 0.0,
+            samples: 0,
+        }
+    }
+
+    fn observe(&mut self, error: f64, model_variance: f64) {
+        if !(error.is_finite() && model_variance.is_finite() && model_variance > 0.0) {
+            return;
+        }
+        let e2 = (error * error).min(Self::CLIP_SIGMAS * Self::CLIP_SIGMAS * model_variance);
+        let k = if self.samples == 0 { 1.0 } else { Self::RATE };
+        self.squared_error += k * (e2 - self.squared_error);
+        self.model_variance += k * (model_variance - self.model_variance);
+        self.samples += 1;
+    }
+
+    /// Factor (≥ 1, ≤ `max`) on the model's heading σ.
+    pub fn sigma_scale(&self, max: f64) -> f64 {
+        if self.samples < Self::WARM_UP || self.model_variance <= 0.0 {
+            return 1.0;
+        }
+        (self.squared_error / self.model_variance)
+            .sqrt()
+            .clamp(1.0, max.max(1.0))
+    }
+}
+
+impl Default for HeadingFit {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 /// Predicts each scan's pose from the previous results and odometry.
 #[derive(Debug, Default)]
 pub struct MotionPredictor {
@@ -149,6 +207,10 @@ pub struct MotionPredictor {
     last_step: Option<Pose2>,
     /// The reading of the scan being processed, until `record`.
     pending: Option<OdometryReading>,
+    /// Heading of the pending prediction from odometry and its variance by
+    /// the unscaled model, until `observe_heading` or `record`.
+    pending_heading: Option<(f64, f64)>,
+    heading_fit: HeadingFit,
 }
 
 fn add_scaled(q: &mut Covariance, other: &Covariance, k: f64) {
@@ -205,6 +267,7 @@ impl MotionPredictor {
     /// invertible.
     pub fn predict(&mut self, reading: OdometryReading, noise: &OdometryNoise) -> Prediction {
         self.pending = Some(reading);
+        self.pending_heading = None;
         let Some((prev, prev_cov)) = self.last else {
             return Prediction {
                 pose: Pose2::IDENTITY,
@@ -236,12 +299,30 @@ impl MotionPredictor {
             &noise.increment_covariance(None),
             anchor.stale_scans as f64,
         );
+        self.pending_heading = Some((anchor.pose.theta + step.theta, anchor.cov[2][2] + q[2][2]));
+        let scale = self.heading_fit.sigma_scale(noise.max_heading_scale);
+        q[2][2] *= scale * scale;
         let (pose, cov) = compose(&anchor.pose, &anchor.cov, &step, &q);
         Prediction {
             pose,
             cov,
             from_odometry: true,
         }
+    }
+
+    /// Localization placed the scan last predicted at heading `theta`
+    /// (rad, before any loop closure moved it): how far the odometry's
+    /// heading was off, for [`HeadingFit`].
+    pub fn observe_heading(&mut self, theta: f64) {
+        if let Some((predicted, variance)) = self.pending_heading.take() {
+            self.heading_fit
+                .observe(crate::geometry::wrap_angle(theta - predicted), variance);
+        }
+    }
+
+    /// The factor the odometry's heading σ is widened by at present.
+    pub fn heading_scale(&self, noise: &OdometryNoise) -> f64 {
+        self.heading_fit.sigma_scale(noise.max_heading_scale)
     }
 
     /// Records the final estimate of the scan last predicted.
@@ -287,6 +368,7 @@ mod tests {
         min_rotation: 0.005,
         missing_translation: 0.3,
         missing_rotation: 0.15,
+        max_heading_scale: 1.0,
     };
 
     fn run(
@@ -387,6 +469,82 @@ mod tests {
         assert_eq!(
             feed.reading(0.2, x(1.0)),
             OdometryReading::Fresh(Pose2::new(1.0, 0.0, 0.0))
+        );
+    }
+
+    /// Heading errors of `sigma` times the model's σ, alternately either
+    /// way, against model variances that vary from scan to scan.
+    fn fitted(sigma: f64, scans: usize) -> HeadingFit {
+        let mut fit = HeadingFit::default();
+        for k in 0..scans {
+            let model_sigma = 0.01 + 0.01 * (k % 3) as f64;
+            let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+            fit.observe(sign * sigma * model_sigma, model_sigma * model_sigma);
+        }
+        fit
+    }
+
+    #[test]
+    fn heading_fit_learns_how_much_worse_the_odometry_is() {
+        assert_eq!(
+            fitted(2.0, 5).sigma_scale(3.0),
+            1.0,
+            "not before the warm-up"
+        );
+        let fits = fitted(1.0, 2000).sigma_scale(3.0);
+        assert!(fits < 1.1, "a model that fits stays about 1: {fits}");
+        let worse = fitted(2.0, 2000).sigma_scale(3.0);
+        assert!((1.8..2.2).contains(&worse), "{worse}");
+        let better = fitted(0.5, 2000).sigma_scale(3.0);
+        assert_eq!(better, 1.0, "never narrower than the model");
+        assert_eq!(fitted(5.0, 2000).sigma_scale(3.0), 3.0, "capped");
+        assert_eq!(fitted(2.0, 2000).sigma_scale(1.0), 1.0, "off");
+    }
+
+    #[test]
+    fn one_wild_heading_error_does_not_widen_the_gates_by_itself() {
+        let mut fit = fitted(1.0, 200);
+        let before = fit.sigma_scale(3.0);
+        fit.observe(1.0, 0.02 * 0.02); // 50 σ: a wrong fix
+        fit.observe(f64::NAN, 0.02 * 0.02);
+        fit.observe(0.01, 0.0);
+        let after = fit.sigma_scale(3.0);
+        assert!(after < 1.6 && after >= before, "{before} -> {after}");
+    }
+
+    #[test]
+    fn predictions_widen_their_heading_sigma_by_the_fit() {
+        let noise = OdometryNoise {
+            max_heading_scale: 3.0,
+            ..NOISE
+        };
+        let mut feed = OdometryFeed::new(0.0);
+        let mut predictor = MotionPredictor::default();
+        let mut narrow = None;
+        for k in 0..40 {
+            let reading = feed.reading(0.2 * k as f64, x(0.1 * k as f64));
+            let p = predictor.predict(reading, &noise);
+            if k == 1 {
+                narrow = Some(p.cov[2][2]);
+            }
+            // Localization keeps turning the heading 3 model σ away.
+            let off = if k % 2 == 0 { 0.03 } else { -0.03 };
+            let fixed = Pose2::new(p.pose.x, p.pose.y, p.pose.theta + off);
+            predictor.observe_heading(fixed.theta);
+            predictor.record(
+                fixed,
+                [[1e-4, 0.0, 0.0], [0.0, 1e-4, 0.0], [0.0, 0.0, 1e-6]],
+                true,
+            );
+        }
+        let scale = predictor.heading_scale(&noise);
+        assert!(scale > 2.0, "{scale}");
+        let p = predictor.predict(feed.reading(8.0, x(4.0)), &noise);
+        assert!(
+            p.cov[2][2] > 4.0 * narrow.unwrap(),
+            "{} vs {:?}",
+            p.cov[2][2],
+            narrow
         );
     }
 }
