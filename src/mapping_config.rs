@@ -264,6 +264,7 @@ impl MapperConfig {
         v.check(x, "merge_threshold", e.merge_threshold, Positive)?;
         v.check(x, "max_fit_chi2", e.max_fit_chi2, Positive)?;
         v.check(x, "min_points", e.min_points as f64, AtLeast(2.0))?;
+        v.check(x, "min_span", e.min_span, NonNegative)?;
         v.check(x, "min_length", e.min_length, NonNegative)?;
         v.check(x, "max_point_gap", e.max_point_gap, Positive)?;
         v.check(x, "min_range", e.min_range, NonNegative)?;
