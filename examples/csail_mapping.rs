@@ -16,7 +16,6 @@ use clsmap::eval::{RelationErrors, evaluate, read_relations};
 use clsmap::input::{ScanRecord, open_log};
 use clsmap::mapping_config::MapperConfig;
 use clsmap::pipeline::OfflineMapper;
-use clsmap::trajectory::write_tum;
 use std::error::Error;
 use std::path::PathBuf;
 
@@ -128,13 +127,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     row("  relations >= 5 s", &evaluate(mapper.trajectory(), &long));
     println!("{summary:#?}");
     if let Some(out) = out {
-        std::fs::create_dir_all(&out)?;
-        let mut f = std::fs::File::create(out.join("trajectory.tum"))?;
-        write_tum(&mut f, mapper.trajectory())?;
-        std::fs::write(
-            out.join("segments.json"),
-            serde_json::to_vec_pretty(&mapper.map().snapshot())?,
-        )?;
+        clsmap::pipeline::write_outputs(&out, &mapper, false)?;
     }
     Ok(())
 }

@@ -27,7 +27,7 @@ use crate::localize::{
     LocalizationResult, LocalizeError, SegmentIndex, localize, localize_searching_heading,
 };
 use crate::map::cls::{ClsError, ClsMap, local_region, picture};
-use crate::map::{Keyframe, KeyframePolicy, SegmentMap, SegmentMapFile};
+use crate::map::{Keyframe, KeyframePolicy, MapContents, SegmentMap};
 use crate::mapping_config::MapperConfig;
 use crate::render::SegmentStyle;
 use crate::trajectory::{StampedPose, TrajectoryError, write_tum};
@@ -45,9 +45,8 @@ use tracing::{debug, trace_span, warn};
 
 /// Name of the trajectory written by [`run_offline_mapping`].
 pub const TRAJECTORY_FILE: &str = "trajectory.tum";
-/// Name of the actual-segment map written by [`run_offline_mapping`].
-pub const SEGMENTS_FILE: &str = "segments.json";
-/// Name of the CLS map written by [`run_offline_mapping`].
+/// Name of the map written by [`run_offline_mapping`] (see
+/// [`crate::map::file`]).
 pub const MAP_FILE: &str = "map.json";
 /// Name of the map's picture written by [`run_offline_mapping`].
 pub const PICTURE_FILE: &str = "map.svg";
@@ -68,7 +67,7 @@ pub enum PipelineError {
     Trajectory(#[from] TrajectoryError),
     #[error("cannot encode the segment map")]
     Json(#[from] serde_json::Error),
-    #[error("cannot save the CLS map")]
+    #[error("cannot save the map")]
     Store(#[from] crate::map::cls::StoreError),
 }
 
@@ -358,6 +357,19 @@ impl OfflineMapper {
             self.cls = cls;
             self.summary.cls_rejected = refused;
             self.cls_stale = false;
+        }
+    }
+
+    /// What the map is made of, as [`MAP_FILE`] stores it: the CLS map,
+    /// the walls, and the keyframes (shared, not copied) with their poses
+    /// and the pose graph's edges.
+    pub fn contents(&self) -> MapContents {
+        MapContents {
+            cls: self.cls.clone(),
+            walls: self.map.segments().collect(),
+            keyframes: self.graph.keyframes().to_vec(),
+            poses: self.graph.poses().to_vec(),
+            edges: self.graph.graph().edges().to_vec(),
         }
     }
 
@@ -738,9 +750,9 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<(), PipelineError> {
 }
 
 /// Writes what a mapper built into `out_dir` (created if needed), each
-/// file atomically: the trajectory ([`TRAJECTORY_FILE`]), the segment map
-/// ([`SEGMENTS_FILE`]), the CLS map ([`MAP_FILE`]) and its picture with the
-/// trajectory ([`PICTURE_FILE`]).
+/// file atomically: the trajectory ([`TRAJECTORY_FILE`]), the map
+/// ([`MAP_FILE`]: CLS map, walls, keyframes, pose graph) and its picture
+/// with the trajectory ([`PICTURE_FILE`]).
 pub fn write_outputs(
     out_dir: &Path,
     mapper: &OfflineMapper,
@@ -756,13 +768,7 @@ pub fn write_outputs(
     } else {
         Vec::new()
     };
-    write_maps(
-        out_dir,
-        &mapper.map().snapshot(),
-        mapper.cls_map(),
-        &poses,
-        &loops,
-    )
+    write_maps(out_dir, &mapper.contents(), &poses, &loops)
 }
 
 /// Creates `out_dir` and its parents if needed.
@@ -773,21 +779,18 @@ pub fn create_output_dir(out_dir: &Path) -> Result<(), PipelineError> {
     })
 }
 
-/// Writes the maps into `out_dir`, each file atomically: the segment map
-/// ([`SEGMENTS_FILE`]), the CLS map ([`MAP_FILE`]) and its picture
-/// ([`PICTURE_FILE`]) with `path` (and the loop closures `loops`, each
-/// from one keyframe position to another) drawn on it.
+/// Writes the map into `out_dir`, each file atomically: [`MAP_FILE`]
+/// (see [`crate::map::file`]) and its picture ([`PICTURE_FILE`]) with
+/// `path` (and the loop closures `loops`, each from one keyframe position
+/// to another) drawn on it.
 pub fn write_maps(
     out_dir: &Path,
-    segments: &SegmentMapFile,
-    cls: &ClsMap,
+    contents: &MapContents,
     path: &[Pose2],
     loops: &[[[f64; 2]; 2]],
 ) -> Result<(), PipelineError> {
-    let json = serde_json::to_vec_pretty(segments)?;
-    write_file(&out_dir.join(SEGMENTS_FILE), &json)?;
-    cls.save(&out_dir.join(MAP_FILE))?;
-    let mut pic = picture(cls, Some(path), path.last().copied());
+    crate::map::file::save(&out_dir.join(MAP_FILE), contents)?;
+    let mut pic = picture(&contents.cls, Some(path), path.last().copied());
     for [a, b] in loops {
         pic.segment(*a, *b, SegmentStyle::LoopEdge);
     }

@@ -565,7 +565,7 @@ fn map_on_the_recording_writes_its_files_and_beats_the_odometry() {
     assert_eq!(trajectory.len(), CSAIL_SCANS);
     // The map frame is the first pose.
     assert_eq!(trajectory[0][1..], [0.0, 0.0, 0.0]);
-    for name in ["trajectory.tum", "segments.json", "map.json", "map.svg"] {
+    for name in ["trajectory.tum", "map.json", "map.svg"] {
         assert!(out.join(name).is_file(), "{name} missing:\n{run}");
     }
     for line in run.stdout.lines() {

@@ -10,7 +10,6 @@
 use clsmap::eval::{Relation, RelationErrors, evaluate, read_relations};
 use clsmap::geometry::Pose2;
 use clsmap::input::{ScanRecord, open_log};
-use clsmap::map::SegmentMapFile;
 use clsmap::mapping_config::MapperConfig;
 use clsmap::pipeline::{OfflineMapper, Progress, run_offline_mapping};
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
@@ -296,9 +295,14 @@ fn run_offline_mapping_writes_trajectory_and_segments() {
         assert!((t - r.scan.t).abs() < 1e-6);
     }
     assert_eq!(tum[0].1, Pose2::IDENTITY);
-    let segments: SegmentMapFile =
-        serde_json::from_slice(&std::fs::read(out.join("segments.json")).unwrap()).unwrap();
-    assert_eq!(segments.segments.len(), summary.segments);
+    // One file holds the map: walls, keyframes and the CLS map; no
+    // segments.json beside it.
+    let loaded = clsmap::map::file::load(&out.join("map.json")).unwrap();
+    assert_eq!(loaded.version, 2);
+    assert_eq!(loaded.contents.walls.len(), summary.segments);
+    assert_eq!(loaded.contents.keyframes.len(), summary.keyframes);
+    assert_eq!(loaded.contents.cls.loops().count(), summary.cls_loops);
+    assert!(!out.join("segments.json").exists());
     // The robot turns on the spot here: one or two keyframes' walls.
     assert!(summary.segments > 5, "{} segments", summary.segments);
     std::fs::remove_dir_all(&out).unwrap();

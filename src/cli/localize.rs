@@ -11,7 +11,6 @@ use clsmap::input::open_log;
 use clsmap::localize::global::{
     GlobalConfig, GlobalError, GlobalMap, GlobalResult, disambiguate, global_localize,
 };
-use clsmap::map::cls::{ClsMap, ClsMapConfig};
 
 /// One output line: `{"t", "hypotheses": [{x, y, theta, score}], "ambiguous"}`,
 /// or `"error"` when the scan could not be localized.
@@ -49,9 +48,16 @@ pub fn localize(
     max_hypotheses: usize,
 ) -> anyhow::Result<ExitCode> {
     let mapper = super::mapping::mapper_config(config)?;
-    let cls = ClsMap::load(map, ClsMapConfig::default())
+    let loaded = clsmap::map::file::load(map)
         .with_context(|| format!("cannot load the map {}", map.display()))?;
-    let global_map = GlobalMap::new(cls.actual_segments().map(|s| s.line));
+    // The walls local localization matched against when the map was made
+    // (version 2); a version-1 file has only the CLS map's actual segments.
+    let contents = loaded.contents;
+    let global_map = if contents.walls.is_empty() {
+        GlobalMap::new(contents.cls.actual_segments().map(|s| s.line))
+    } else {
+        GlobalMap::new(contents.walls.iter().map(|w| w.line))
+    };
     anyhow::ensure!(
         !global_map.is_empty(),
         "the map {} has no walls (actual segments) to localize against",

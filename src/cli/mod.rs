@@ -126,7 +126,7 @@ enum Command {
     Map {
         /// CARMEN log (.clf/.log) or clsmap recording.
         input: PathBuf,
-        /// Directory for trajectory.tum, segments.json and map.svg.
+        /// Directory for trajectory.tum, map.json and map.svg.
         #[arg(long)]
         out: PathBuf,
         /// Mapper configuration (TOML); every key and default is in config/mapper.toml.

@@ -1,7 +1,8 @@
 //! [`Checkpoint`]: a snapshot of the map and the new poses, written off
 //! the loop.
 //!
-//! Taking the snapshot is quick (a copy of the map); writing it — JSON,
+//! Taking the snapshot is quick (a copy of the walls and the CLS map; the
+//! keyframes are shared, not copied); writing it — JSON,
 //! the picture, fsyncs on an SD card — can take long enough to starve the
 //! loop, so the daemon writes it on a blocking thread while the loop goes
 //! on. Poses of a checkpoint that could not be written come back in the
@@ -11,8 +12,7 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use crate::geometry::Pose2;
-use crate::map::SegmentMapFile;
-use crate::map::cls::ClsMap;
+use crate::map::MapContents;
 use crate::pipeline::{PipelineError, TRAJECTORY_FILE, create_output_dir, write_maps};
 use crate::trajectory::{StampedPose, TUM_HEADER, write_tum_lines};
 
@@ -22,8 +22,8 @@ pub struct Checkpoint {
     pub dir: PathBuf,
     /// Poses since the last checkpoint written, appended to the trajectory.
     pub trajectory: Vec<StampedPose>,
-    pub segments: SegmentMapFile,
-    pub cls: ClsMap,
+    /// The map as [`crate::map::file`] stores it.
+    pub map: MapContents,
     /// The path drawn on the picture.
     pub path: Vec<Pose2>,
 }
@@ -53,8 +53,7 @@ impl Checkpoint {
             return Err(fail(error, self.trajectory));
         }
         // The poses are on disk now; a failure below keeps none back.
-        write_maps(&self.dir, &self.segments, &self.cls, &self.path, &[])
-            .map_err(|e| fail(e, Vec::new()))
+        write_maps(&self.dir, &self.map, &self.path, &[]).map_err(|e| fail(e, Vec::new()))
     }
 }
 

@@ -282,8 +282,7 @@ impl LiveMapper {
         Checkpoint {
             dir: dir.to_owned(),
             trajectory,
-            segments: self.mapper.map().snapshot(),
-            cls: self.mapper.cls_map().clone(),
+            map: self.mapper.contents(),
             path: self.picture_path.iter().copied().collect(),
         }
     }

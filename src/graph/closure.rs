@@ -241,7 +241,7 @@ impl LoopMatch {
 /// Everything the search needs to know of the keyframes.
 #[derive(Debug, Clone, Copy)]
 pub struct LoopQuery<'a> {
-    pub keyframes: &'a [Keyframe],
+    pub keyframes: &'a [std::sync::Arc<Keyframe>],
     /// Current estimate of each keyframe's pose (map frame).
     pub poses: &'a [Pose2],
     /// The keyframe to close a loop for (usually the newest).

@@ -3,6 +3,7 @@
 //! keyframe order whenever a loop closure moves the poses.
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 use std::time::Instant;
 
 use serde::Serialize;
@@ -56,7 +57,9 @@ pub struct Correction {
 /// Keyframes, the pose graph over them, and the counters.
 #[derive(Debug, Clone, Default)]
 pub struct KeyframeGraph {
-    keyframes: Vec<Keyframe>,
+    /// Shared, since a keyframe never changes once taken: a snapshot of
+    /// the map for a checkpoint copies pointers, not scans.
+    keyframes: Vec<Arc<Keyframe>>,
     graph: PoseGraph,
     stats: LoopStats,
     /// Loop edges added since the last optimisation (each agreed with the
@@ -79,8 +82,46 @@ impl KeyframeGraph {
         KeyframeGraph::default()
     }
 
-    pub fn keyframes(&self) -> &[Keyframe] {
+    pub fn keyframes(&self) -> &[Arc<Keyframe>] {
         &self.keyframes
+    }
+
+    /// A graph of `keyframes` at `poses` tied by `edges`, as a map file
+    /// stores them (see [`crate::map::file`]); the next keyframe taken
+    /// continues the path from the last one. Refused when the counts
+    /// disagree or an edge does not fit.
+    pub fn from_parts(
+        keyframes: Vec<Arc<Keyframe>>,
+        poses: Vec<Pose2>,
+        edges: Vec<super::Edge>,
+    ) -> Result<Self, GraphError> {
+        if keyframes.len() != poses.len() {
+            return Err(GraphError::Inconsistent(format!(
+                "{} keyframes but {} poses",
+                keyframes.len(),
+                poses.len()
+            )));
+        }
+        let mut graph = PoseGraph::new();
+        for pose in &poses {
+            graph.add_pose(*pose);
+        }
+        let mut last_loop_keyframe = None;
+        for edge in edges {
+            if edge.kind == EdgeKind::Loop {
+                last_loop_keyframe = Some(edge.to);
+            }
+            graph.add_edge(edge)?;
+        }
+        Ok(KeyframeGraph {
+            odometer: keyframes.last().map_or(0.0, |k| k.travelled),
+            last_taken: poses.last().copied(),
+            taken: keyframes.len(),
+            keyframes,
+            graph,
+            last_loop_keyframe,
+            ..KeyframeGraph::default()
+        })
     }
 
     pub fn graph(&self) -> &PoseGraph {
@@ -142,7 +183,7 @@ impl KeyframeGraph {
                 debug!("chain edge refused: {e}");
             }
         }
-        self.keyframes.push(keyframe);
+        self.keyframes.push(Arc::new(keyframe));
         index
     }
 

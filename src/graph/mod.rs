@@ -100,6 +100,8 @@ pub enum GraphError {
     NonFinite { from: usize, to: usize },
     #[error("the graph's normal equations are not positive definite (disconnected poses?)")]
     NotPositiveDefinite,
+    #[error("the stored graph is inconsistent: {0}")]
+    Inconsistent(String),
 }
 
 /// What one optimisation did.

@@ -118,6 +118,26 @@ impl SegmentIndex {
         Self::default()
     }
 
+    /// An index holding `lines` under the given ids (ids not given stay
+    /// free and are never reused); `None` if an id repeats.
+    pub fn from_ids(lines: impl IntoIterator<Item = (SegmentId, CogLine)>) -> Option<Self> {
+        let mut index = SegmentIndex::new();
+        for (id, line) in lines {
+            let i = id.0 as usize;
+            if index.lines.len() <= i {
+                index.lines.resize(i + 1, None);
+            }
+            if index.lines[i].replace(line).is_some() {
+                return None;
+            }
+            index.live += 1;
+            if let Some(aabb) = line_aabb(&line, 0.0) {
+                index.bvh.insert(aabb, id.0);
+            }
+        }
+        Some(index)
+    }
+
     /// Adds a line and returns its id.
     ///
     /// # Panics

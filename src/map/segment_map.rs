@@ -5,7 +5,7 @@
 //! - `SegmentMapConfig` (serde): fusion gates, bridging gap, σ floors.
 //! - `SegmentMap::new(cfg)`, `update(local_lines, pose, pose_cov) ->
 //!   UpdateStats`, `index() -> &SegmentIndex`, `len()`, `segments()`,
-//!   `observations(id)`, `snapshot() -> SegmentMapFile` (the JSON form).
+//!   `observations(id)`, `from_walls(cfg, walls)` (as a map file stores them).
 //! - `blur_by_pose(line_robot, pose, cov) -> CogLine` (map frame) and
 //!   `fuse(a, b) -> Option<CogLine>`: the two steps of an update, public
 //!   so the CLS map can fuse the same way.
@@ -77,21 +77,7 @@ pub struct UpdateStats {
     pub merged: usize,
 }
 
-/// The map's JSON form (`segments.json`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SegmentMapFile {
-    /// Always [`SegmentMapFile::FORMAT`].
-    pub format: String,
-    pub version: u32,
-    pub segments: Vec<MapSegment>,
-}
-
-impl SegmentMapFile {
-    pub const FORMAT: &'static str = "clsmap-actual-segments";
-    pub const VERSION: u32 = 1;
-}
-
-/// One map segment in the JSON form.
+/// One wall of the map, as `map.json` stores it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct MapSegment {
     pub id: SegmentId,
@@ -297,13 +283,19 @@ impl SegmentMap {
         })
     }
 
-    /// The map in its JSON form.
-    pub fn snapshot(&self) -> SegmentMapFile {
-        SegmentMapFile {
-            format: SegmentMapFile::FORMAT.to_owned(),
-            version: SegmentMapFile::VERSION,
-            segments: self.segments().collect(),
+    /// The map of `walls` (as [`segments`](Self::segments) gave them,
+    /// from a map file), keeping their ids; `None` if two share an id.
+    pub fn from_walls(config: SegmentMapConfig, walls: &[MapSegment]) -> Option<Self> {
+        let index = SegmentIndex::from_ids(walls.iter().map(|w| (w.id, w.line)))?;
+        let mut map = SegmentMap {
+            config,
+            index,
+            observations: Vec::new(),
+        };
+        for w in walls {
+            map.set_observations(w.id, w.observations);
         }
+        Some(map)
     }
 
     fn floor_sigmas(&self, mut line: CogLine) -> CogLine {
@@ -558,16 +550,32 @@ mod tests {
     }
 
     #[test]
-    fn snapshot_round_trips_through_json() {
+    fn walls_round_trip_through_json_keeping_their_ids() {
         let mut map = SegmentMap::new(SegmentMapConfig::default());
+        map.update(
+            &[
+                wall(0.0, 2.0, 1.0, 0.01, 0.01),
+                wall(0.0, 2.0, -1.0, 0.01, 0.01),
+            ],
+            &Pose2::IDENTITY,
+            &NO_COV,
+        );
         map.update(
             &[wall(0.0, 2.0, 1.0, 0.01, 0.01)],
             &Pose2::IDENTITY,
             &NO_COV,
         );
-        let json = serde_json::to_string(&map.snapshot()).unwrap();
-        let back: SegmentMapFile = serde_json::from_str(&json).unwrap();
-        assert_eq!(back, map.snapshot());
-        assert_eq!(back.format, SegmentMapFile::FORMAT);
+        let mut walls: Vec<MapSegment> = map.segments().collect();
+        // A gap in the ids, as a bridged wall leaves behind.
+        walls[1].id = SegmentId(7);
+        let json = serde_json::to_string(&walls).unwrap();
+        let back: Vec<MapSegment> = serde_json::from_str(&json).unwrap();
+        let rebuilt = SegmentMap::from_walls(SegmentMapConfig::default(), &back).unwrap();
+        assert_eq!(rebuilt.segments().collect::<Vec<_>>(), walls);
+        assert_eq!(rebuilt.observations(SegmentId(0)), 2);
+        assert_eq!(rebuilt.index().get(SegmentId(7)), Some(&walls[1].line));
+        assert!(rebuilt.index().get(SegmentId(1)).is_none());
+        let twice = [walls[0], walls[0]];
+        assert!(SegmentMap::from_walls(SegmentMapConfig::default(), &twice).is_none());
     }
 }

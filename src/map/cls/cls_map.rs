@@ -20,7 +20,7 @@ use super::region::{
     EdgeOrigin, RegionConfig, RegionEdge, RegionError, RegionShape, clean_checked, union,
 };
 use super::shapes::{group_loops, to_shapes, whole_contours};
-use super::store::{StoreError, load_items, save_items};
+use super::store::StoreError;
 use super::window::Window;
 
 /// A multiply–rotate hasher for the exact bit patterns of segment end
@@ -224,16 +224,23 @@ impl ClsMap {
         check_loops(&self.shapes)
     }
 
-    /// Writes the map to `path` as versioned `map.json`, atomically.
+    /// Writes the map alone (no walls or keyframes) to `path` as
+    /// `map.json` (see [`crate::map::file`]), atomically.
     pub fn save(&self, path: &Path) -> Result<(), StoreError> {
-        save_items(path, &self.items())
+        let contents = crate::map::MapContents {
+            cls: self.clone(),
+            ..Default::default()
+        };
+        crate::map::file::save(path, &contents)
     }
 
-    /// Reads a map written by [`save`](Self::save); a corrupt, truncated or
-    /// invalid file is refused with the reason.
+    /// Reads the CLS map of a `map.json` of either version; a corrupt,
+    /// truncated or invalid file is refused with the reason.
     pub fn load(path: &Path, config: ClsMapConfig) -> Result<Self, StoreError> {
-        let shapes = load_items(path)?;
-        ClsMap::from_shapes(config, shapes).map_err(StoreError::Invariant)
+        let loaded = crate::map::file::load(path)?;
+        let mut map = loaded.contents.cls;
+        map.config = config;
+        Ok(map)
     }
 
     /// Adds one scan: `lines` extracted from `scan` (robot frame, scan

@@ -9,15 +9,17 @@
 //!
 //! Metres, radians, map frame. `checksum` is the CRC-32 (ISO-HDLC, as zip
 //! and PNG) of the bytes of the `segments` array exactly as stored (written
-//! as compact JSON, the last member of the file). The stored bytes are
-//! checked rather than a re-serialisation of the parsed numbers, because
-//! serde_json's default float parser may differ from the writer by one
-//! unit in the last place, which would change the re-serialised text.
-//! Files are written atomically: a temporary file in the same directory,
-//! fsync, rename, fsync of the directory, so a crash leaves either the old
-//! map or the new one.
+//! as compact JSON, the last member of the file). The segments are parsed
+//! from exactly the bytes the checksum covers, whatever the spelling of
+//! their key, so no edit of the file can reach the map unchecked. The
+//! stored bytes are checked rather than a re-serialisation of the parsed
+//! numbers, because serde_json's default float parser may differ from the
+//! writer by one unit in the last place, which would change the
+//! re-serialised text.
+//!
+//! This is version 1, the CLS map alone; [`crate::map::file`] writes
+//! version 2 (walls, keyframes and the pose graph too) and reads both.
 
-use std::fs;
 use std::path::{Path, PathBuf};
 
 use crc::{CRC_32_ISO_HDLC, Crc};
@@ -49,19 +51,22 @@ pub struct SegmentRecord {
     pub end: [f64; 2],
 }
 
-/// The whole file.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// The whole version-1 file, its segments still as the bytes stored.
+#[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct MapFile {
-    pub format: String,
-    pub version: u32,
+struct MapFile<'a> {
+    format: String,
+    version: u32,
     /// Frame of every coordinate; always "map".
-    pub frame: String,
+    #[allow(dead_code)]
+    frame: String,
     /// Program and version that wrote the file.
-    pub created_by: String,
+    #[allow(dead_code)]
+    created_by: String,
     /// CRC-32 of the compact JSON of `segments`.
-    pub checksum: u32,
-    pub segments: Vec<SegmentRecord>,
+    checksum: u32,
+    #[serde(borrow)]
+    segments: &'a serde_json::value::RawValue,
 }
 
 /// Why a map could not be stored or loaded.
@@ -78,7 +83,7 @@ pub enum StoreError {
     Parse(serde_json::Error),
     #[error("not a CLS map file (format {0:?})")]
     Format(String),
-    #[error("map file version {found} is not supported (this build reads {VERSION})")]
+    #[error("map file version {found} is not supported (this build reads 1 and 2)")]
     Version { found: u32 },
     #[error("checksum mismatch: the file says {stored:#010x}, its segments give {computed:#010x}")]
     Checksum { stored: u32, computed: u32 },
@@ -96,6 +101,8 @@ pub enum StoreError {
     BrokenLoop(usize),
     #[error("the stored map is not a valid CLS map: {0}")]
     Invariant(InvariantError),
+    #[error("the stored map is inconsistent: {0}")]
+    Inconsistent(String),
 }
 
 fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> StoreError + '_ {
@@ -105,7 +112,25 @@ fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> StoreError + '_ {
     }
 }
 
-fn record(item: &ClsmItem) -> SegmentRecord {
+pub(crate) fn io_error_at(path: &Path) -> impl FnOnce(std::io::Error) -> StoreError + '_ {
+    io_error(path)
+}
+
+pub(crate) fn crc32(bytes: &[u8]) -> u32 {
+    CRC32.checksum(bytes)
+}
+
+/// A parse error, told apart: a file cut short, or one that is not JSON of
+/// the expected shape.
+pub(crate) fn parse_error(e: serde_json::Error) -> StoreError {
+    if e.is_eof() {
+        StoreError::Truncated(e)
+    } else {
+        StoreError::Parse(e)
+    }
+}
+
+pub(crate) fn record(item: &ClsmItem) -> SegmentRecord {
     SegmentRecord {
         index: item.index,
         next: item.next,
@@ -146,73 +171,16 @@ pub fn encode(items: &[ClsmItem]) -> Result<String, serde_json::Error> {
     Ok(format!("{open},\n\"segments\":{array}}}\n"))
 }
 
-/// The raw text of member `key` of the top-level object in `text`, or
-/// `None` if there is no such member (or the text is not an object).
-fn raw_member<'a>(text: &'a str, key: &str) -> Option<&'a str> {
-    let bytes = text.as_bytes();
-    let mut depth = 0usize;
-    let mut i = 0;
-    let mut value_start: Option<usize> = None;
-    let mut value_depth = 0;
-    while i < bytes.len() {
-        match bytes[i] {
-            b'"' => {
-                let start = i + 1;
-                i += 1;
-                while i < bytes.len() && bytes[i] != b'"' {
-                    i += if bytes[i] == b'\\' { 2 } else { 1 };
-                }
-                let string = text.get(start..i.min(text.len()))?;
-                if depth == 1 && value_start.is_none() && string == key {
-                    // A key at the top level is followed by ':'.
-                    let rest = text.get(i + 1..)?;
-                    let colon = rest.find(|c: char| !c.is_whitespace())?;
-                    if rest[colon..].starts_with(':') {
-                        let after = i + 1 + colon + 1;
-                        let skip = text.get(after..)?.find(|c: char| !c.is_whitespace())?;
-                        value_start = Some(after + skip);
-                        value_depth = depth;
-                        i = after + skip;
-                        continue;
-                    }
-                }
-            }
-            b'{' | b'[' => depth += 1,
-            b'}' | b']' => {
-                depth = depth.checked_sub(1)?;
-                if let Some(start) = value_start.filter(|_| depth == value_depth) {
-                    return text.get(start..=i);
-                }
-            }
-            _ => {}
-        }
-        i += 1;
-    }
-    None
-}
-
-/// Writes `items` to `path` atomically.
+/// Writes `items` to `path` atomically as version 1 (what builds before
+/// version 2 wrote; kept so such files can be made for tests).
 pub fn save_items(path: &Path, items: &[ClsmItem]) -> Result<(), StoreError> {
     let text = encode(items).map_err(StoreError::Parse)?;
     crate::durable::write_atomically(path, text.as_bytes()).map_err(io_error(path))
 }
 
-/// Reads and validates a map file; returns its shapes (not yet checked
-/// against the loop invariants, which the caller does).
-pub fn load_items(path: &Path) -> Result<Vec<ClsShape>, StoreError> {
-    let text = fs::read_to_string(path).map_err(io_error(path))?;
-    decode(&text)
-}
-
-/// Parses and validates the contents of a map file.
+/// Parses and validates the contents of a version-1 map file.
 pub fn decode(text: &str) -> Result<Vec<ClsShape>, StoreError> {
-    let file: MapFile = serde_json::from_str(text).map_err(|e| {
-        if e.is_eof() {
-            StoreError::Truncated(e)
-        } else {
-            StoreError::Parse(e)
-        }
-    })?;
+    let file: MapFile<'_> = serde_json::from_str(text).map_err(parse_error)?;
     if file.format != FORMAT {
         return Err(StoreError::Format(file.format));
     }
@@ -221,7 +189,7 @@ pub fn decode(text: &str) -> Result<Vec<ClsShape>, StoreError> {
             found: file.version,
         });
     }
-    let raw = raw_member(text, "segments").unwrap_or("");
+    let raw = file.segments.get();
     let computed = CRC32.checksum(raw.as_bytes());
     if computed != file.checksum {
         return Err(StoreError::Checksum {
@@ -229,8 +197,17 @@ pub fn decode(text: &str) -> Result<Vec<ClsShape>, StoreError> {
             computed,
         });
     }
-    let n = file.segments.len();
-    for (position, s) in file.segments.iter().enumerate() {
+    let segments: Vec<SegmentRecord> = serde_json::from_str(raw).map_err(parse_error)?;
+    shapes_from_checked_records(&segments)
+}
+
+/// Checks `segments` (finite, indices in order, links in range) and
+/// follows them into shapes.
+pub(crate) fn shapes_from_checked_records(
+    segments: &[SegmentRecord],
+) -> Result<Vec<ClsShape>, StoreError> {
+    let n = segments.len();
+    for (position, s) in segments.iter().enumerate() {
         let numbers = [
             s.theta,
             s.sigma_theta,
@@ -253,7 +230,7 @@ pub fn decode(text: &str) -> Result<Vec<ClsShape>, StoreError> {
             });
         }
     }
-    shapes_from_records(&file.segments)
+    shapes_from_records(segments)
 }
 
 /// Follows the `next` links into loops, then groups holes (clockwise)
@@ -439,31 +416,45 @@ mod tests {
     }
 
     #[test]
-    fn the_segments_member_is_found_at_the_top_level_only() {
-        let text =
-            r#"{"a":"\"segments\":[1]","b":{"segments":[2]},"segments" : [ [3], {"x":"]"} ] }"#;
-        assert_eq!(raw_member(text, "segments"), Some(r#"[ [3], {"x":"]"} ]"#));
-        assert_eq!(raw_member("[1]", "segments"), None);
-        assert_eq!(raw_member(r#"{"segments":[1"#, "segments"), None);
+    fn an_escaped_key_cannot_carry_unchecked_segments() {
+        let text = encode(&items(&square_shape())).unwrap();
+        // Edited coordinates under a zero checksum and an escaped key: the
+        // bytes parsed are the bytes checked, so this is a mismatch.
+        let forged = text
+            .replacen("3.0", "9.0", 1)
+            .replace("\"segments\"", "\"segm\\u0065nts\"");
+        let forged = regex_free_checksum_zero(&forged);
+        assert!(
+            matches!(decode(&forged), Err(StoreError::Checksum { stored: 0, .. })),
+            "{:?}",
+            decode(&forged)
+        );
+        // A second segments member is refused, not silently chosen.
+        let twice = text.replacen("\"frame\"", "\"segments\":[],\"frame\"", 1);
+        assert!(decode(&twice).is_err());
+    }
+
+    /// `text` with its checksum value replaced by 0.
+    fn regex_free_checksum_zero(text: &str) -> String {
+        let at = text.find("\"checksum\":").unwrap() + "\"checksum\":".len();
+        let end = at + text[at..].find(',').unwrap();
+        format!("{}0{}", &text[..at], &text[end..])
     }
 
     #[test]
     fn saving_is_atomic_and_leaves_no_temporary_file() {
         let dir = std::env::temp_dir().join(format!("clsmap-store-{}", std::process::id()));
-        fs::create_dir_all(&dir).unwrap();
+        std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("map.json");
         save_items(&path, &items(&square_shape())).unwrap();
         save_items(&path, &items(&square_shape())).unwrap();
-        let names: Vec<_> = fs::read_dir(&dir)
+        let names: Vec<_> = std::fs::read_dir(&dir)
             .unwrap()
             .map(|e| e.unwrap().file_name())
             .collect();
         assert_eq!(names.len(), 1, "{names:?}");
-        assert_eq!(load_items(&path).unwrap().len(), 1);
-        assert!(matches!(
-            load_items(&dir.join("missing.json")),
-            Err(StoreError::Io { .. })
-        ));
-        fs::remove_dir_all(&dir).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert_eq!(decode(&text).unwrap().len(), 1);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

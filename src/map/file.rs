@@ -1,0 +1,547 @@
+//! `map.json`, version 2: everything a map is made of, in one file.
+//!
+//! ```json
+//! {"format":"clsmap-map","version":2,"frame":"map","created_by":"clsmap 0.1.0",
+//!  "checksum":123456789,
+//!  "payload":{"segments":[...],"walls":[...],"keyframes":[...],"edges":[...]}}
+//! ```
+//!
+//! - `segments`: the CLS map's CLSM_Item list, as in version 1.
+//! - `walls`: the fused wall segments local localization matched against
+//!   (`id`, `observations`, `line`); what `segments.json` held before.
+//! - `keyframes`: per keyframe its time, pose, pose covariance, path
+//!   length, lines and local CLS region (robot frame): the source the
+//!   walls and the CLS map are rebuilt from.
+//! - `edges`: the pose graph over the keyframes (chain and loop edges,
+//!   measurement and information), so loops close against a loaded map.
+//!
+//! Metres, radians, map frame. `checksum` is the CRC-32 of the bytes of
+//! `payload` exactly as stored; the payload is parsed from exactly those
+//! bytes, so no edit reaches the map unchecked. Files are written
+//! atomically (see [`crate::durable`]). Version 1 files (the CLS map only)
+//! still load, with no walls or keyframes.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use nalgebra::Matrix3;
+use serde::{Deserialize, Serialize};
+
+use super::cls::loops::ClsmItem;
+use super::cls::store::{
+    self, SegmentRecord, StoreError, crc32, io_error_at, parse_error, record,
+    shapes_from_checked_records,
+};
+use super::cls::{ClsMap, ClsMapConfig, LocalEdge, LocalRegion, LocalSource};
+use super::{Keyframe, MapSegment};
+use crate::geometry::{CogLine, Pose2};
+use crate::graph::{Edge, EdgeKind};
+
+/// The file's `format` tag.
+pub const FORMAT: &str = "clsmap-map";
+/// The version this build writes.
+pub const VERSION: u32 = 2;
+
+/// One keyframe as stored.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct KeyframeRecord {
+    t: f64,
+    pose: Pose2,
+    covariance: [[f64; 3]; 3],
+    travelled: f64,
+    lines: Vec<CogLine>,
+    region: Option<RegionRecord>,
+}
+
+/// A local region as its closed polygon: vertex `i` starts edge `i`, and
+/// `lines[i]` is the scan line edge `i` lies on (`null` for a virtual
+/// edge). Half the size of edges with both ends, for the same polygon.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RegionRecord {
+    points: Vec<[f64; 2]>,
+    lines: Vec<Option<usize>>,
+}
+
+impl RegionRecord {
+    fn new(region: &LocalRegion) -> Self {
+        RegionRecord {
+            points: region.edges.iter().map(|e| e.start).collect(),
+            lines: region
+                .edges
+                .iter()
+                .map(|e| match e.source {
+                    LocalSource::Actual(i) => Some(i),
+                    LocalSource::Virtual => None,
+                })
+                .collect(),
+        }
+    }
+
+    fn region(&self) -> LocalRegion {
+        let n = self.points.len();
+        LocalRegion {
+            edges: (0..n)
+                .map(|i| LocalEdge {
+                    start: self.points[i],
+                    end: self.points[(i + 1) % n],
+                    source: self
+                        .lines
+                        .get(i)
+                        .copied()
+                        .flatten()
+                        .map_or(LocalSource::Virtual, LocalSource::Actual),
+                })
+                .collect(),
+        }
+    }
+}
+
+/// One pose-graph edge as stored.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EdgeRecord {
+    from: usize,
+    to: usize,
+    kind: EdgeKind,
+    measurement: Pose2,
+    information: [[f64; 3]; 3],
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Payload {
+    segments: Vec<SegmentRecord>,
+    walls: Vec<MapSegment>,
+    keyframes: Vec<KeyframeRecord>,
+    edges: Vec<EdgeRecord>,
+}
+
+#[derive(Serialize)]
+struct Header<'a> {
+    format: &'a str,
+    version: u32,
+    frame: &'a str,
+    created_by: &'a str,
+    checksum: u32,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Envelope<'a> {
+    format: String,
+    #[allow(dead_code)]
+    version: u32,
+    #[allow(dead_code)]
+    frame: String,
+    #[allow(dead_code)]
+    created_by: String,
+    checksum: u32,
+    #[serde(borrow)]
+    payload: &'a serde_json::value::RawValue,
+}
+
+/// Just enough of either version to tell which it is.
+#[derive(Deserialize)]
+struct Probe {
+    format: String,
+    version: u32,
+}
+
+/// What a map is made of: the CLS map, the walls, and the keyframes with
+/// their poses and the pose graph's edges. Keyframes are shared, not
+/// copied, so a snapshot of a running map is cheap. The walls and the CLS
+/// map are derived data: a rebuild from the keyframes at their poses gives
+/// them again.
+#[derive(Debug, Clone, Default)]
+pub struct MapContents {
+    pub cls: ClsMap,
+    pub walls: Vec<MapSegment>,
+    pub keyframes: Vec<Arc<Keyframe>>,
+    pub poses: Vec<Pose2>,
+    pub edges: Vec<Edge>,
+}
+
+/// A map file read back, and which version it was.
+#[derive(Debug, Clone)]
+pub struct LoadedMap {
+    pub contents: MapContents,
+    pub version: u32,
+}
+
+fn matrix(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
+    std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
+}
+
+/// The file text for `contents`.
+pub fn encode(contents: &MapContents) -> Result<String, serde_json::Error> {
+    let items: Vec<ClsmItem> = contents.cls.items();
+    let payload = Payload {
+        segments: items.iter().map(record).collect(),
+        walls: contents.walls.clone(),
+        keyframes: contents
+            .keyframes
+            .iter()
+            .zip(&contents.poses)
+            .map(|(k, pose)| KeyframeRecord {
+                t: k.t,
+                pose: *pose,
+                covariance: k.covariance,
+                travelled: k.travelled,
+                lines: k.lines.clone(),
+                region: k.region.as_ref().map(RegionRecord::new),
+            })
+            .collect(),
+        edges: contents
+            .edges
+            .iter()
+            .map(|e| EdgeRecord {
+                from: e.from,
+                to: e.to,
+                kind: e.kind,
+                measurement: e.measurement,
+                information: matrix(&e.information),
+            })
+            .collect(),
+    };
+    let body = serde_json::to_string(&payload)?;
+    let header = serde_json::to_string(&Header {
+        format: FORMAT,
+        version: VERSION,
+        frame: "map",
+        created_by: concat!("clsmap ", env!("CARGO_PKG_VERSION")),
+        checksum: crc32(body.as_bytes()),
+    })?;
+    // `header` is a JSON object: open it up and append the payload last.
+    let open = header.strip_suffix('}').unwrap_or(&header);
+    Ok(format!("{open},\n\"payload\":{body}}}\n"))
+}
+
+/// Writes `contents` to `path` atomically.
+pub fn save(path: &Path, contents: &MapContents) -> Result<(), StoreError> {
+    let text = encode(contents).map_err(StoreError::Parse)?;
+    crate::durable::write_atomically(path, text.as_bytes()).map_err(io_error_at(path))
+}
+
+/// Reads a map file of either version; a corrupt, truncated, foreign or
+/// inconsistent file is refused with the reason.
+pub fn load(path: &Path) -> Result<LoadedMap, StoreError> {
+    let text = std::fs::read_to_string(path).map_err(io_error_at(path))?;
+    decode(&text)
+}
+
+/// Parses and validates the contents of a map file of either version.
+pub fn decode(text: &str) -> Result<LoadedMap, StoreError> {
+    let probe: Probe = serde_json::from_str(text).map_err(parse_error)?;
+    if probe.format == store::FORMAT && probe.version == store::VERSION {
+        let shapes = store::decode(text)?;
+        return Ok(LoadedMap {
+            contents: MapContents {
+                cls: ClsMap::from_shapes(ClsMapConfig::default(), shapes)
+                    .map_err(StoreError::Invariant)?,
+                ..MapContents::default()
+            },
+            version: store::VERSION,
+        });
+    }
+    if probe.format != FORMAT && probe.format != store::FORMAT {
+        return Err(StoreError::Format(probe.format));
+    }
+    if probe.version != VERSION {
+        return Err(StoreError::Version {
+            found: probe.version,
+        });
+    }
+    let file: Envelope<'_> = serde_json::from_str(text).map_err(parse_error)?;
+    if file.format != FORMAT {
+        return Err(StoreError::Format(file.format));
+    }
+    let raw = file.payload.get();
+    let computed = crc32(raw.as_bytes());
+    if computed != file.checksum {
+        return Err(StoreError::Checksum {
+            stored: file.checksum,
+            computed,
+        });
+    }
+    let payload: Payload = serde_json::from_str(raw).map_err(parse_error)?;
+    let shapes = shapes_from_checked_records(&payload.segments)?;
+    let cls =
+        ClsMap::from_shapes(ClsMapConfig::default(), shapes).map_err(StoreError::Invariant)?;
+    let contents = checked_contents(cls, payload)?;
+    Ok(LoadedMap {
+        contents,
+        version: VERSION,
+    })
+}
+
+fn all_finite(values: impl IntoIterator<Item = f64>) -> bool {
+    values.into_iter().all(f64::is_finite)
+}
+
+fn line_numbers(l: &CogLine) -> [f64; 9] {
+    [
+        l.theta,
+        l.xc,
+        l.yc,
+        l.sigma_theta,
+        l.sigma_c,
+        l.start[0],
+        l.start[1],
+        l.end[0],
+        l.end[1],
+    ]
+}
+
+fn inconsistent(what: String) -> StoreError {
+    StoreError::Inconsistent(what)
+}
+
+/// The payload's walls, keyframes and edges, checked: finite numbers,
+/// distinct wall ids, edges between stored keyframes with a positive
+/// semi-definite information matrix.
+fn checked_contents(cls: ClsMap, payload: Payload) -> Result<MapContents, StoreError> {
+    let mut ids = std::collections::HashSet::new();
+    for (i, w) in payload.walls.iter().enumerate() {
+        if !all_finite(line_numbers(&w.line)) {
+            return Err(inconsistent(format!("wall {i} has a non-finite number")));
+        }
+        if !ids.insert(w.id) {
+            return Err(inconsistent(format!("wall id {} appears twice", w.id.0)));
+        }
+    }
+    let n = payload.keyframes.len();
+    let mut keyframes = Vec::with_capacity(n);
+    let mut poses = Vec::with_capacity(n);
+    for (i, k) in payload.keyframes.into_iter().enumerate() {
+        let numbers = [k.t, k.travelled, k.pose.x, k.pose.y, k.pose.theta]
+            .into_iter()
+            .chain(k.covariance.iter().flatten().copied())
+            .chain(k.lines.iter().flat_map(line_numbers))
+            .chain(k.region.iter().flat_map(|r| &r.points).flatten().copied());
+        if !all_finite(numbers) {
+            return Err(inconsistent(format!(
+                "keyframe {i} has a non-finite number"
+            )));
+        }
+        let lines = k.lines.len();
+        let bad_region = k.region.as_ref().is_some_and(|r| {
+            r.lines.len() != r.points.len() || r.lines.iter().flatten().any(|&j| j >= lines)
+        });
+        if bad_region {
+            return Err(inconsistent(format!(
+                "keyframe {i}'s region does not fit its lines"
+            )));
+        }
+        poses.push(k.pose);
+        keyframes.push(Arc::new(Keyframe {
+            t: k.t,
+            region: k.region.as_ref().map(RegionRecord::region),
+            lines: k.lines,
+            covariance: k.covariance,
+            travelled: k.travelled,
+        }));
+    }
+    let mut edges = Vec::with_capacity(payload.edges.len());
+    for (i, e) in payload.edges.iter().enumerate() {
+        let numbers = [e.measurement.x, e.measurement.y, e.measurement.theta]
+            .into_iter()
+            .chain(e.information.iter().flatten().copied());
+        if !all_finite(numbers) {
+            return Err(inconsistent(format!("edge {i} has a non-finite number")));
+        }
+        if e.from >= n || e.to >= n || e.from == e.to {
+            return Err(inconsistent(format!(
+                "edge {i} joins keyframes {} and {} of {n}",
+                e.from, e.to
+            )));
+        }
+        let information = Matrix3::from_fn(|r, c| e.information[r][c]);
+        let symmetric = (information - information.transpose()).abs().max()
+            <= 1e-9 * information.abs().max().max(1.0);
+        let semi_definite = information
+            .symmetric_eigen()
+            .eigenvalues
+            .iter()
+            .all(|&v| v >= -1e-9 * information.abs().max().max(1.0));
+        if !(symmetric && semi_definite) {
+            return Err(inconsistent(format!(
+                "edge {i}'s information is not symmetric positive semi-definite"
+            )));
+        }
+        edges.push(Edge {
+            from: e.from,
+            to: e.to,
+            measurement: e.measurement,
+            information,
+            kind: e.kind,
+        });
+    }
+    Ok(MapContents {
+        cls,
+        walls: payload.walls,
+        keyframes,
+        poses,
+        edges,
+    })
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::graph::diagonal_information;
+    use crate::map::cls::loops::items;
+    use crate::map::cls::{ClsLoop, ClsSegment, ClsShape};
+
+    fn square() -> ClsMap {
+        let pts = [[0.0, 0.0], [3.0, 0.0], [3.0, 2.0], [0.0, 2.0]];
+        let outer = ClsLoop::new(
+            (0..4)
+                .map(|i| ClsSegment::virtual_between(pts[i], pts[(i + 1) % 4]))
+                .collect(),
+        );
+        let shapes = vec![ClsShape {
+            outer,
+            holes: vec![],
+        }];
+        ClsMap::from_shapes(ClsMapConfig::default(), shapes).unwrap()
+    }
+
+    fn contents() -> MapContents {
+        let wall = CogLine::from_centre(0.0, [1.5, 0.0], -1.5, 1.5, 0.005, 0.002, 40);
+        let keyframe = |t: f64| Keyframe {
+            t,
+            lines: vec![wall],
+            region: Some(LocalRegion {
+                edges: vec![
+                    LocalEdge {
+                        start: [0.0, 0.0],
+                        end: [1.0, 0.0],
+                        source: LocalSource::Actual(0),
+                    },
+                    LocalEdge {
+                        start: [1.0, 0.0],
+                        end: [0.0, 1.0],
+                        source: LocalSource::Virtual,
+                    },
+                    LocalEdge {
+                        start: [0.0, 1.0],
+                        end: [0.0, 0.0],
+                        source: LocalSource::Virtual,
+                    },
+                ],
+            }),
+            covariance: [[1e-4, 0.0, 0.0], [0.0, 1e-4, 0.0], [0.0, 0.0, 1e-5]],
+            travelled: t * 0.5,
+        };
+        MapContents {
+            cls: square(),
+            walls: vec![MapSegment {
+                id: crate::localize::SegmentId(3),
+                observations: 2,
+                line: wall,
+            }],
+            keyframes: vec![Arc::new(keyframe(0.0)), Arc::new(keyframe(1.0))],
+            poses: vec![Pose2::IDENTITY, Pose2::new(0.5, 0.0, 0.1)],
+            edges: vec![Edge {
+                from: 0,
+                to: 1,
+                measurement: Pose2::new(0.5, 0.0, 0.1),
+                information: diagonal_information(0.01, 0.002),
+                kind: EdgeKind::Chain,
+            }],
+        }
+    }
+
+    #[test]
+    fn version_2_round_trips_every_part() {
+        let c = contents();
+        let back = decode(&encode(&c).unwrap()).unwrap();
+        assert_eq!(back.version, 2);
+        assert_eq!(back.contents.cls.items(), c.cls.items());
+        assert_eq!(back.contents.walls, c.walls);
+        assert_eq!(back.contents.poses, c.poses);
+        assert_eq!(back.contents.edges, c.edges);
+        assert_eq!(*back.contents.keyframes[1], *c.keyframes[1]);
+    }
+
+    #[test]
+    fn version_1_files_still_load_with_the_cls_map_alone() {
+        let v1 = store::encode(&items(square().shapes())).unwrap();
+        let back = decode(&v1).unwrap();
+        assert_eq!(back.version, 1);
+        assert_eq!(back.contents.cls.items(), square().items());
+        assert!(back.contents.walls.is_empty() && back.contents.keyframes.is_empty());
+    }
+
+    /// `text` with its payload replaced by `payload` and a checksum that
+    /// matches it: a consistent-looking file with whatever content.
+    fn with_payload(text: &str, payload: &str) -> String {
+        let at = text.find("\"payload\":").unwrap();
+        let header = &text[..at];
+        let c = header.find("\"checksum\":").unwrap() + "\"checksum\":".len();
+        let end = c + header[c..].find(',').unwrap();
+        format!(
+            "{}{}{}\"payload\":{payload}}}\n",
+            &header[..c],
+            crc32(payload.as_bytes()),
+            &header[end..]
+        )
+    }
+
+    #[test]
+    fn corrupt_forged_and_inconsistent_files_are_refused_with_the_reason() {
+        let text = encode(&contents()).unwrap();
+        let flipped = text.replacen("0.005", "0.006", 1);
+        assert!(matches!(decode(&flipped), Err(StoreError::Checksum { .. })));
+        assert!(matches!(
+            decode(&text[..text.len() - 20]),
+            Err(StoreError::Truncated(_))
+        ));
+        // Zero checksum, escaped key, edited numbers: still a mismatch.
+        let at = text.find("\"checksum\":").unwrap() + "\"checksum\":".len();
+        let end = at + text[at..].find(',').unwrap();
+        let forged = format!("{}0{}", &text[..at], &text[end..])
+            .replace("\"payload\"", "\"p\\u0061yload\"")
+            .replacen("0.005", "0.5", 1);
+        assert!(matches!(
+            decode(&forged),
+            Err(StoreError::Checksum { stored: 0, .. })
+        ));
+        let v3 = text.replacen("\"version\":2", "\"version\":3", 1);
+        assert!(matches!(decode(&v3), Err(StoreError::Version { found: 3 })));
+        let foreign = text.replacen("clsmap-map", "someone-else", 1);
+        assert!(matches!(decode(&foreign), Err(StoreError::Format(_))));
+
+        let raw = &text[text.find("\"payload\":").unwrap() + 10..text.len() - 2];
+        let bad_edge = with_payload(&text, &raw.replacen("\"to\":1", "\"to\":9", 1));
+        match decode(&bad_edge) {
+            Err(StoreError::Inconsistent(why)) => assert!(why.contains("edge 0"), "{why}"),
+            other => panic!("{other:?}"),
+        }
+        let bad_source = with_payload(&text, &raw.replacen("\"lines\":[0,", "\"lines\":[5,", 1));
+        match decode(&bad_source) {
+            Err(StoreError::Inconsistent(why)) => assert!(why.contains("keyframe 0"), "{why}"),
+            other => panic!("{other:?}"),
+        }
+        let twice = with_payload(&text, &raw.replacen("\"id\":3", "\"id\":3},{\"id\":3,\"observations\":1,\"line\":{\"theta\":0.0,\"xc\":0.0,\"yc\":0.0,\"sigma_theta\":0.1,\"sigma_c\":0.1,\"start\":[0.0,0.0],\"end\":[1.0,0.0],\"n_points\":5}", 1));
+        assert!(decode(&twice).is_err());
+        let negative = with_payload(
+            &text,
+            &raw.replacen("\"information\":[[10000.0", "\"information\":[[-10000.0", 1),
+        );
+        match decode(&negative) {
+            Err(StoreError::Inconsistent(why)) => assert!(why.contains("semi-definite"), "{why}"),
+            other => panic!("{other:?}"),
+        }
+        assert!(
+            decode(&with_payload(
+                &text,
+                &raw.replacen("\"t\":1.0", "\"t\":1e999", 1)
+            ))
+            .is_err()
+        );
+    }
+}
