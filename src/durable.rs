@@ -1,7 +1,9 @@
 //! Durable file writes: a file is replaced whole or not at all, so a crash
 //! or power loss mid-write never leaves a half-written map behind.
 
-use std::fs::{self, File};
+#[cfg(test)]
+use std::fs;
+use std::fs::File;
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
@@ -9,6 +11,11 @@ use std::path::{Path, PathBuf};
 /// directory, flushed to disk, renamed over the target, and the directory
 /// entry flushed too (the rename is durable only then). On failure the
 /// previous file at `path`, if any, is untouched.
+///
+/// The temporary file has an unpredictable name and is created
+/// exclusively (`O_EXCL`), so a link planted in the directory is never
+/// followed: it makes the creation fail, or is simply not the name
+/// chosen, and no file elsewhere is written or truncated.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> io::Result<()> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
@@ -17,26 +24,24 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> io::Result<()> {
     let name = path
         .file_name()
         .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "the path names no file"))?;
-    let tmp = dir.join(format!(
-        ".{}.tmp-{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    let write = || -> io::Result<()> {
-        let mut f = File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()
-    };
-    if let Err(e) = write() {
-        // Best effort: the temporary file is useless now.
-        let _ = fs::remove_file(&tmp);
-        return Err(e);
-    }
-    if let Err(e) = fs::rename(&tmp, path) {
-        let _ = fs::remove_file(&tmp);
-        return Err(e);
-    }
+    let mut prefix = std::ffi::OsString::from(".");
+    prefix.push(name);
+    prefix.push(".tmp-");
+    // Dropping the temporary file on an error path removes it.
+    let mut tmp = tempfile::Builder::new().prefix(&prefix).tempfile_in(&dir)?;
+    tmp.write_all(bytes)?;
+    tmp.as_file().sync_all()?;
+    tmp.persist(path).map_err(|e| e.error)?;
     File::open(&dir).and_then(|d| d.sync_all())
+}
+
+/// Whether a file can be created in `dir`: one with no name, or an
+/// unpredictable one removed at once, so nothing in `dir` is followed or
+/// truncated.
+pub fn check_writable(dir: &Path) -> io::Result<()> {
+    let mut f = tempfile::tempfile_in(dir)?;
+    f.write_all(b"clsmap")?;
+    f.sync_all()
 }
 
 #[cfg(test)]
@@ -56,6 +61,41 @@ mod tests {
             .map(|e| e.unwrap().file_name())
             .collect();
         assert_eq!(names.len(), 1, "{names:?}");
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A link planted where the temporary file of the old, predictable
+    /// scheme would go, and one at every name the directory listing
+    /// suggests: the victim it points at is never touched.
+    #[cfg(unix)]
+    #[test]
+    fn planted_links_are_never_followed() {
+        let dir = std::env::temp_dir().join(format!("clsmap-durable-ln-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        fs::create_dir_all(dir.join("out")).unwrap();
+        let victim = dir.join("victim");
+        fs::write(&victim, b"keep").unwrap();
+        let out = dir.join("out");
+        for name in [
+            format!(".map.json.tmp-{}", std::process::id()),
+            ".map.json.tmp-".to_owned(),
+            ".clsmap-write-test".to_owned(),
+        ] {
+            std::os::unix::fs::symlink(&victim, out.join(name)).unwrap();
+        }
+        let path = out.join("map.json");
+        write_atomically(&path, b"map").unwrap();
+        check_writable(&out).unwrap();
+        assert_eq!(fs::read(&victim).unwrap(), b"keep");
+        assert_eq!(fs::read(&path).unwrap(), b"map");
+        assert!(
+            !fs::symlink_metadata(&path)
+                .unwrap()
+                .file_type()
+                .is_symlink()
+        );
+        // Nothing left behind but the map and the planted links.
+        assert_eq!(fs::read_dir(&out).unwrap().count(), 4);
         fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -1162,3 +1162,40 @@ fn run_refuses_a_bad_config_naming_the_key_and_line() {
         "{run}"
     );
 }
+
+/// Hardening: links planted at the names a map write used to take (the
+/// temporary file's `.map.json.tmp-<pid>`, with the pid known to a shell
+/// that `exec`s the mapper) are never followed: the file they point at
+/// keeps its contents and `map.json` is a regular file.
+#[cfg(unix)]
+#[test]
+fn a_planted_link_never_redirects_a_map_write() {
+    let dir = std::env::temp_dir().join(format!("clsmap-cli-link-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = dir.join("o");
+    std::fs::create_dir_all(&out).unwrap();
+    let victim = dir.join("victim");
+    std::fs::write(&victim, "keep\n").unwrap();
+    let script = format!(
+        "for n in map.json.tmp-$$ map.svg.tmp-$$ trajectory.tum.tmp-$$; do ln -s '{}' '{}'/.$n; done; exec '{}' map '{}' --out '{}'",
+        victim.display(),
+        out.display(),
+        env!("CARGO_BIN_EXE_clsmap"),
+        fixture(CSAIL_FIXTURE).display(),
+        out.display()
+    );
+    let status = Command::new("sh")
+        .arg("-c")
+        .arg(&script)
+        .env("NO_COLOR", "1")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .unwrap();
+    assert!(status.success());
+    assert_eq!(std::fs::read_to_string(&victim).unwrap(), "keep\n");
+    let meta = std::fs::symlink_metadata(out.join("map.json")).unwrap();
+    assert!(meta.file_type().is_file());
+    clsmap::map::file::load(&out.join("map.json")).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -220,9 +220,7 @@ fn check_writable(dir: &Path) -> Result<(), DaemonError> {
         source,
     };
     std::fs::create_dir_all(dir).map_err(fail)?;
-    let probe = dir.join(format!(".clsmap-write-test-{}", std::process::id()));
-    std::fs::write(&probe, b"").map_err(fail)?;
-    std::fs::remove_file(&probe).map_err(fail)
+    crate::durable::check_writable(dir).map_err(fail)
 }
 
 /// Everything the loop owns besides the mapper.
