@@ -168,6 +168,12 @@ pub struct MappingSummary {
     pub rejections_by_kind: BTreeMap<String, usize>,
     /// Where a recording broke off, when it did (the scans before were mapped).
     pub input_broken: Option<String>,
+    /// Input items skipped (malformed lines, bad odometry samples, damaged
+    /// recording records, scans out of time order), and the first few.
+    pub skipped_input: usize,
+    pub skipped_examples: Vec<String>,
+    /// Scans whose odometry was not finite: mapped as scans without it.
+    pub scans_with_bad_odometry: usize,
     /// Keyframes whose CLS map update was refused (the map kept as it was).
     pub cls_rejected: usize,
     /// Scans that carried no odometry.
@@ -548,14 +554,28 @@ impl OfflineMapper {
             clock.last = None;
         }
         let _scan_span = trace_span!("scan", t = record.scan.t).entered();
-        if record.odometry.is_none() {
+        // A non-finite odometry pose would poison every prediction after
+        // it: the scan is mapped as one without odometry.
+        let odometry = record
+            .odometry
+            .filter(|p| p.x.is_finite() && p.y.is_finite() && p.theta.is_finite());
+        if odometry.is_none() && record.odometry.is_some() {
+            self.summary.scans_with_bad_odometry += 1;
+            if self.summary.scans_with_bad_odometry <= SKIPPED_EXAMPLES {
+                warn!(
+                    t = record.scan.t,
+                    "the scan's odometry is not finite; mapped without it"
+                );
+            }
+        }
+        if odometry.is_none() {
             self.summary.scans_without_odometry += 1;
         }
 
         let t = Instant::now();
         let prediction = trace_span!("predict").in_scope(|| {
-            let reading = self.odometry.reading(record.scan.t, record.odometry);
-            if reading == OdometryReading::Stale && record.odometry.is_some() {
+            let reading = self.odometry.reading(record.scan.t, odometry);
+            if reading == OdometryReading::Stale && odometry.is_some() {
                 self.summary.scans_with_unchanged_odometry += 1;
             }
             self.predictor.predict(reading, &self.config.odometry)
@@ -797,26 +817,42 @@ pub fn write_maps(
     write_file(&out_dir.join(PICTURE_FILE), pic.to_svg().as_bytes())
 }
 
+/// How many skipped input items are named one by one (the rest counted).
+pub const SKIPPED_EXAMPLES: usize = 5;
+
 /// Maps a log file offline and writes its outputs (see [`write_outputs`])
-/// into `out_dir` (created if needed). In a text log the first unreadable
-/// line ends the run with an error naming it, and nothing is written. A
-/// recording cut short (a killed recorder, a power loss) is mapped up to
-/// the break, as far as it is whole; the summary says where it broke.
+/// into `out_dir` (created if needed). Input items that cannot be used (a
+/// malformed line, a bad odometry sample, a damaged recording record, a
+/// scan out of time order) are skipped, counted and the first few named
+/// (see [`crate::input`]); with `strict` the first one ends the run with
+/// its error and nothing is written. A recording cut short (a killed
+/// recorder, a power loss) is mapped up to the break; the summary says
+/// where it broke.
 pub fn run_offline_mapping(
     input: &Path,
     out_dir: &Path,
     config: &MapperConfig,
     draw_loops: bool,
+    strict: bool,
     progress: &mut dyn FnMut(Progress),
 ) -> Result<MappingSummary, PipelineError> {
     let mut log = open_log(input)?;
     let mut mapper = OfflineMapper::new(*config);
     mapper.defer_cls_rebuild();
     let mut input_broken = None;
+    let (mut skipped, mut examples) = (0, Vec::new());
     while let Some(record) = log.next() {
         let record = match record {
             Ok(r) => r,
-            Err(InputError::Recording(e)) => {
+            Err(e) if e.is_skipped_item() && !strict => {
+                skipped += 1;
+                if examples.len() < SKIPPED_EXAMPLES {
+                    warn!("skipped: {e}");
+                    examples.push(e.to_string());
+                }
+                continue;
+            }
+            Err(InputError::Recording(e)) if !strict => {
                 warn!("{e}: mapping the scans before the break");
                 input_broken = Some(e.to_string());
                 break;
@@ -836,6 +872,11 @@ pub fn run_offline_mapping(
     mapper.finish();
     let mut summary = mapper.summary();
     summary.input_broken = input_broken;
+    summary.skipped_input = skipped;
+    summary.skipped_examples = examples;
+    if skipped > SKIPPED_EXAMPLES {
+        warn!("{skipped} input items skipped in all");
+    }
     if summary.rejected_localizations > 0 {
         warn!(
             rejected = summary.rejected_localizations,

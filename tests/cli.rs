@@ -739,7 +739,10 @@ fn a_recording_cut_short_is_mapped_up_to_the_break() {
     let half = dir.join("half.rec");
     std::fs::write(&half, &full[..full.len() / 2]).unwrap();
     let out = dir.join("out");
-    let run = map(&half, &out, &[]).succeeded();
+    // The map is written from what there is; the exit status says the
+    // input was not whole.
+    let run = map(&half, &out, &[]);
+    assert_eq!(run.status.code(), Some(4), "{run}");
     assert!(run.stdout.contains("input broke off"), "{run}");
     let poses = read_tum(&out.join("trajectory.tum"));
     assert!(
@@ -1198,4 +1201,106 @@ fn a_planted_link_never_redirects_a_map_write() {
     assert!(meta.file_type().is_file());
     clsmap::map::file::load(&out.join("map.json")).unwrap();
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The number after `label` on a line of `clsmap map`'s report.
+fn reported(stdout: &str, label: &str) -> usize {
+    let line = stdout
+        .lines()
+        .find(|l| l.trim_start().starts_with(label))
+        .unwrap_or_else(|| panic!("no {label:?} in:\n{stdout}"));
+    let rest = &line.trim_start()[label.len()..];
+    rest.split_whitespace().next().unwrap().parse().unwrap()
+}
+
+/// The fixture's records with `edit` applied, written as a new recording.
+fn edited_fixture(path: &Path, edit: impl Fn(usize, &mut Record)) {
+    let bytes = std::fs::read(fixture(CSAIL_FIXTURE)).unwrap();
+    let (mut all, error) = records(&bytes);
+    assert!(error.is_none());
+    for (i, r) in all.iter_mut().enumerate() {
+        edit(i, r);
+    }
+    let mut w = lms200::recording::RecordingWriter::new(Vec::new()).unwrap();
+    for r in &all {
+        w.write(r).unwrap();
+    }
+    std::fs::write(path, w.into_inner()).unwrap();
+}
+
+/// Hardening: one NaN odometry sample (valid record checksum) is skipped
+/// and named; the scans around it keep interpolated odometry, the map is
+/// as good as without it, and the exit status says input was skipped.
+#[test]
+fn a_nan_odometry_sample_is_skipped_not_spread() {
+    let dir = TempDir::new("nan-odometry");
+    let input = dir.join("nan.rec");
+    let seen = std::cell::Cell::new(0);
+    edited_fixture(&input, |_, r| {
+        if let Record::Odometry { x, .. } = r {
+            seen.set(seen.get() + 1);
+            if seen.get() == 2 {
+                *x = f64::NAN;
+            }
+        }
+    });
+    assert!(seen.get() > 10, "the fixture has odometry");
+    let run = map(&input, &dir.join("out"), &[]);
+    assert_eq!(run.status.code(), Some(4), "{run}");
+    assert!(run.stdout.contains("non-finite pose"), "{run}");
+    assert_eq!(reported(&run.stdout, "mapped"), CSAIL_SCANS);
+    let rejected = reported(&run.stdout, "localizations rejected:");
+    assert!(
+        rejected < 10,
+        "{rejected} of {CSAIL_SCANS} rejected:\n{run}"
+    );
+    let strict = map(&input, &dir.join("strict"), &["--strict"]);
+    assert_eq!(strict.status.code(), Some(1), "{strict}");
+    assert!(!dir.join("strict").exists());
+}
+
+/// Hardening: a flipped bit costs the damaged record (a chunk of serial
+/// bytes: at most a scan or two), not the rest of the recording.
+#[test]
+fn a_flipped_bit_costs_one_record_not_the_rest() {
+    let dir = TempDir::new("flipped");
+    let mut bytes = std::fs::read(fixture(CSAIL_FIXTURE)).unwrap();
+    let at = bytes.len() / 3;
+    bytes[at] ^= 0x08;
+    let input = dir.join("flipped.rec");
+    std::fs::write(&input, &bytes).unwrap();
+    let run = map(&input, &dir.join("out"), &[]);
+    assert_eq!(run.status.code(), Some(4), "{run}");
+    assert!(run.stdout.contains("damaged at byte"), "{run}");
+    let mapped = reported(&run.stdout, "mapped");
+    assert!((CSAIL_SCANS - 2..=CSAIL_SCANS).contains(&mapped), "{run}");
+}
+
+/// Hardening: a malformed CARMEN line is skipped and named with its line
+/// number, the rest mapped; `--strict` keeps the old all-or-nothing run.
+#[test]
+fn a_malformed_carmen_line_is_skipped_and_named() {
+    let Some(dir) = csail_dir() else { return };
+    let tmp = TempDir::new("malformed");
+    let mut lines: Vec<String> = clf_head(&dir.join("mit-csail.clf"), 40)
+        .lines()
+        .map(str::to_owned)
+        .collect();
+    let flaser_lines: Vec<usize> = (0..lines.len())
+        .filter(|&i| lines[i].starts_with("FLASER"))
+        .collect();
+    let victim = flaser_lines[20];
+    lines[victim] = lines[victim].replacen(' ', " x", 3);
+    let input = tmp.join("bad.clf");
+    std::fs::write(&input, lines.join("\n") + "\n").unwrap();
+    let run = map(&input, &tmp.join("out"), &[]);
+    assert_eq!(run.status.code(), Some(4), "{run}");
+    assert!(
+        run.stdout.contains(&format!("line {}", victim + 1)),
+        "{run}"
+    );
+    assert_eq!(reported(&run.stdout, "mapped"), flaser_lines.len() - 1);
+    let strict = map(&input, &tmp.join("strict"), &["--strict"]);
+    assert_eq!(strict.status.code(), Some(1), "{strict}");
+    assert!(!tmp.join("strict").exists());
 }

@@ -277,6 +277,7 @@ fn run_offline_mapping_writes_trajectory_and_segments() {
         &out,
         &MapperConfig::default(),
         true,
+        false,
         &mut |p: Progress| last = Some(p),
     )
     .unwrap();
@@ -308,27 +309,53 @@ fn run_offline_mapping_writes_trajectory_and_segments() {
     std::fs::remove_dir_all(&out).unwrap();
 }
 
-/// A malformed line stops the run with its line number and writes nothing.
+/// With `strict`, a malformed line stops the run with its line number and
+/// writes nothing; without, it is skipped and named, and the rest mapped.
 #[test]
 fn malformed_input_is_reported_with_its_line() {
     let out = std::env::temp_dir().join(format!("clsmap-mapping-bad-{}", std::process::id()));
     std::fs::create_dir_all(&out).unwrap();
     let input = out.join("bad.clf");
-    std::fs::write(
-        &input,
-        "# header\nFLASER 2 1.0 oops 0 0 0 0 0 0 1.0 host 1.0\n",
-    )
-    .unwrap();
+    let scan = |t: f64, x: f64| {
+        let ranges = vec!["2.0"; 181].join(" ");
+        format!("FLASER 181 {ranges} 0 0 0 {x} 0 0 {t} host {t}\n")
+    };
+    let mut text = String::from("# header\n");
+    for k in 0..6 {
+        text += &scan(1.0 + 0.2 * k as f64, 0.01 * k as f64);
+        if k == 2 {
+            text += "FLASER 2 1.0 oops 0 0 0 0 0 0 1.0 host 1.0\n";
+        }
+    }
+    std::fs::write(&input, text).unwrap();
     let err = run_offline_mapping(
         &input,
         &out.join("result"),
         &MapperConfig::default(),
         false,
+        true,
         &mut |_| {},
     )
     .unwrap_err();
     let chain = format!("{err}: {}", std::error::Error::source(&err).unwrap());
-    assert!(chain.contains("line 2"), "{chain}");
+    assert!(chain.contains("line 5"), "{chain}");
     assert!(!out.join("result").exists());
+
+    let summary = run_offline_mapping(
+        &input,
+        &out.join("result"),
+        &MapperConfig::default(),
+        false,
+        false,
+        &mut |_| {},
+    )
+    .unwrap();
+    assert_eq!(summary.scans, 6);
+    assert_eq!(summary.skipped_input, 1);
+    assert!(
+        summary.skipped_examples[0].contains("line 5"),
+        "{summary:?}"
+    );
+    assert!(out.join("result/map.json").is_file());
     std::fs::remove_dir_all(&out).unwrap();
 }

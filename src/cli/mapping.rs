@@ -11,12 +11,17 @@ use clsmap::pipeline::{self, Progress};
 use clsmap::trajectory::read_tum;
 use indicatif::{ProgressBar, ProgressStyle};
 
+/// Exit status of `map` when some input was skipped or the input broke
+/// off: the map was written, from less than was asked for.
+pub const PARTIAL_INPUT: u8 = 4;
+
 pub fn map(
     input: &Path,
     out: &Path,
     config: Option<&Path>,
     relations: Option<&Path>,
     draw_loops: bool,
+    strict: bool,
 ) -> anyhow::Result<ExitCode> {
     let config = mapper_config(config)?;
     let bar = ProgressBar::new(0).with_style(
@@ -35,7 +40,8 @@ pub fn map(
             bar.set_message(format!("{} scans", p.scans));
         }
     };
-    let result = pipeline::run_offline_mapping(input, out, &config, draw_loops, &mut on_progress);
+    let result =
+        pipeline::run_offline_mapping(input, out, &config, draw_loops, strict, &mut on_progress);
     bar.finish_and_clear();
     let summary = result.with_context(|| format!("cannot map {}", input.display()))?;
     let t = &summary.mean_time;
@@ -83,10 +89,33 @@ pub fn map(
     if let Some(broken) = &summary.input_broken {
         println!("  input broke off:            {broken} (the scans before it were mapped)");
     }
+    if summary.skipped_input > 0 {
+        println!(
+            "  input skipped:              {} items (first: {})",
+            summary.skipped_input,
+            summary.skipped_examples.join("; ")
+        );
+    }
+    if summary.scans_with_bad_odometry > 0 {
+        println!(
+            "  odometry not finite:        {} scans (mapped without it)",
+            summary.scans_with_bad_odometry
+        );
+    }
     println!("  wrote {}", out.display());
     if let Some(relations) = relations {
         let trajectory_file = out.join(pipeline::TRAJECTORY_FILE);
         print_errors(&score(&trajectory_file, relations)?);
+    }
+    let partial = summary.input_broken.is_some()
+        || summary.skipped_input > 0
+        || summary.scans_with_bad_odometry > 0;
+    if partial {
+        eprintln!(
+            "clsmap: {} was not used whole (see above); the map was written from the rest (exit status {PARTIAL_INPUT})",
+            input.display()
+        );
+        return Ok(ExitCode::from(PARTIAL_INPUT));
     }
     Ok(ExitCode::SUCCESS)
 }

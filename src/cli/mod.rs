@@ -122,7 +122,11 @@ enum Command {
         #[arg(long, default_value_t = 1)]
         seed: u64,
     },
-    /// Build a map offline from a CARMEN log or a recording.
+    /// Build a map offline from a CARMEN log or a recording. Input that
+    /// cannot be used (malformed lines, bad odometry, damaged records,
+    /// scans out of time order) is skipped and named; the exit status is
+    /// then 4 (the map was written from the rest), 0 when all input was
+    /// used.
     Map {
         /// CARMEN log (.clf/.log) or clsmap recording.
         input: PathBuf,
@@ -138,6 +142,10 @@ enum Command {
         /// Draw the accepted loop closures on map.svg (keyframe to keyframe).
         #[arg(long)]
         draw_loops: bool,
+        /// Stop at the first input item that cannot be used, writing
+        /// nothing, instead of skipping it.
+        #[arg(long)]
+        strict: bool,
     },
     /// Draw a CLS map (map.json) as SVG, or export it as a ROS map_server
     /// occupancy grid (PGM + YAML) when the output ends in `.pgm`.
@@ -285,12 +293,14 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             config,
             relations,
             draw_loops,
+            strict,
         } => mapping::map(
             &input,
             &out,
             config.as_deref(),
             relations.as_deref(),
             draw_loops,
+            strict,
         ),
         Command::Eval {
             trajectory,

@@ -224,6 +224,7 @@ pub fn decode(
         Ok(())
     };
     let mut broke = None;
+    let mut damaged = 0usize;
     if raw {
         let mut bytes = Vec::new();
         std::io::BufReader::new(input)
@@ -242,6 +243,12 @@ pub fn decode(
         for record in reader {
             let record = match record {
                 Ok(r) => r,
+                // The reader skips a damaged stretch and goes on.
+                Err(e @ lms200::recording::RecordingError::Damaged { .. }) => {
+                    eprintln!("{}: {e}", file.display());
+                    damaged += 1;
+                    continue;
+                }
                 Err(e) => {
                     broke = Some(e);
                     break;
@@ -285,6 +292,12 @@ pub fn decode(
         stats.truncated,
         stats.junk_bytes
     );
+    if damaged > 0 && broke.is_none() {
+        anyhow::bail!(
+            "{}: {damaged} damaged stretches skipped (named above); the scans around them were printed",
+            file.display()
+        );
+    }
     if let Some(e) = broke {
         // Everything before the break was printed; say where it broke.
         return Err(anyhow::Error::new(e).context(format!(

@@ -291,6 +291,8 @@ pub struct CarmenScans<R> {
     pending: VecDeque<(RangeScan, Option<Pose2>)>,
     odometry: OdometryTrack,
     finished: bool,
+    /// Time of the last scan queued, to skip scans out of time order.
+    last_scan_t: Option<f64>,
 }
 
 impl<R: BufRead> CarmenScans<R> {
@@ -302,6 +304,7 @@ impl<R: BufRead> CarmenScans<R> {
             pending: VecDeque::new(),
             odometry: OdometryTrack::new(),
             finished: false,
+            last_scan_t: None,
         }
     }
 
@@ -346,7 +349,17 @@ impl<R: BufRead> CarmenScans<R> {
             kind: MalformedLine::NotUtf8,
         })?;
         match parse_line(text).map_err(|kind| InputError::Malformed { line, kind })? {
-            Some(CarmenEntry::Laser { scan, odometry }) => self.pending.push_back((scan, odometry)),
+            Some(CarmenEntry::Laser { scan, odometry }) => {
+                if let Some(previous) = self.last_scan_t.filter(|&p| scan.t <= p) {
+                    return Err(InputError::ScanOutOfOrder {
+                        at: format!("line {line}"),
+                        t: scan.t,
+                        previous,
+                    });
+                }
+                self.last_scan_t = Some(scan.t);
+                self.pending.push_back((scan, odometry));
+            }
             Some(CarmenEntry::Odometry { t, pose }) => self
                 .odometry
                 .push(t, pose)
@@ -369,10 +382,12 @@ impl<R: BufRead> Iterator for CarmenScans<R> {
                 return None;
             }
             if let Err(e) = self.read_one() {
-                // Stop after an error: the caller decides whether to go on
-                // by opening the log again; partial state is not trusted.
-                self.finished = true;
-                self.pending.clear();
+                // A bad line is skipped (the caller counts it); a failed
+                // read ends the log.
+                if !e.is_skipped_item() {
+                    self.finished = true;
+                    self.pending.clear();
+                }
                 return Some(Err(e));
             }
         }
@@ -538,8 +553,12 @@ mod tests {
             flaser(&["1.0"], (0.0, 0.0, 0.0), 3.0)
         );
         let out = scans(&text);
-        assert_eq!(out.len(), 2, "one scan, then the error, then nothing");
-        assert!(out[0].is_ok());
+        assert_eq!(
+            out.len(),
+            3,
+            "one scan, the skipped line's error, the next scan"
+        );
+        assert!(out[0].is_ok() && out[2].is_ok());
         let err = out[1].as_ref().unwrap_err();
         assert!(
             matches!(err, InputError::Malformed { line: 3, .. }),
@@ -592,5 +611,42 @@ mod tests {
         let text = "ODOM 0 0 0 0 0 0 10.0 h 10.0\nODOM 0 0 0 0 0 0 9.0 h 9.0\n";
         let out = scans(text);
         assert!(matches!(out[0], Err(InputError::Odometry { line: 2, .. })));
+    }
+
+    #[test]
+    fn bad_lines_are_skipped_named_and_the_rest_read() {
+        let r = ["1.0", "2.0", "3.0"];
+        let text = [
+            flaser(&r, (0.0, 0.0, 0.0), 10.0),
+            "FLASER 3 1.0 nope\n".to_owned(),
+            flaser(&r, (0.1, 0.0, 0.0), 10.2),
+            // Back in time, then a duplicate time: both skipped.
+            flaser(&r, (0.2, 0.0, 0.0), 10.1),
+            flaser(&r, (0.2, 0.0, 0.0), 10.2),
+            "ODOM 1 0 0 0 0 0 10.3 host 10.3\n".to_owned(),
+            "ODOM 1 0 0 0 0 0 10.25 host 10.25\n".to_owned(),
+            "ODOM nan 0 0 0 0 0 10.35 host 10.35\n".to_owned(),
+            flaser(&r, (0.3, 0.0, 0.0), 10.4),
+        ]
+        .concat();
+        let items = scans(&text);
+        let good: Vec<f64> = items
+            .iter()
+            .filter_map(|i| Some(i.as_ref().ok()?.scan.t))
+            .collect();
+        assert_eq!(good, vec![10.0, 10.2, 10.4]);
+        let lines: Vec<String> = items
+            .iter()
+            .filter_map(|i| i.as_ref().err())
+            .inspect(|e| assert!(e.is_skipped_item(), "{e}"))
+            .map(|e| e.to_string())
+            .collect();
+        assert_eq!(lines.len(), 5, "{lines:?}");
+        for (e, line) in lines
+            .iter()
+            .zip(["line 2", "line 4", "line 5", "line 7", "line 8"])
+        {
+            assert!(e.contains(line), "{e} should name {line}");
+        }
     }
 }

@@ -110,7 +110,12 @@ pub struct RecordingScans<R: Read> {
     baud: Baud,
     odometry: OdometryTrack,
     waiting: VecDeque<RangeScan>,
+    /// Skipped items to report before the next scan.
+    skipped: VecDeque<InputError>,
+    /// What ended the recording, yielded after its last scan.
     error: Option<InputError>,
+    /// Time of the last scan queued, to skip scans out of time order.
+    last_scan_t: Option<f64>,
     ended: bool,
 }
 
@@ -124,7 +129,9 @@ impl<R: Read> RecordingScans<R> {
             baud: Baud::B9600,
             odometry: OdometryTrack::new(),
             waiting: VecDeque::new(),
+            skipped: VecDeque::new(),
             error: None,
+            last_scan_t: None,
             ended: false,
         })
     }
@@ -147,20 +154,43 @@ impl<R: Read> RecordingScans<R> {
     fn read_record(&mut self) {
         match self.records.next_record() {
             None => self.ended = true,
+            // Damage is skipped by the reader and reported; anything else
+            // ends the recording.
             Some(Err(e)) => {
-                self.ended = true;
-                self.error = Some(InputError::Recording(e));
+                let e = InputError::Recording(e);
+                if e.is_skipped_item() {
+                    self.skipped.push_back(e);
+                } else {
+                    self.ended = true;
+                    self.error = Some(e);
+                }
             }
             Some(Ok(record)) => match record {
                 Record::Rx { t_us, bytes } => {
                     let (mode, baud) = (self.mode, self.baud);
                     let waiting = &mut self.waiting;
+                    let skipped = &mut self.skipped;
+                    let last_scan_t = &mut self.last_scan_t;
+                    let offset = self.records.offset();
                     self.decoder.feed(&bytes, |event| {
                         if let DecodeEvent::Reply(frame) = event {
                             if let Reply::ScanData(scan) = frame.reply {
                                 let t = seconds(scan_time_us(t_us, &scan, baud));
                                 if let Some(rs) = range_scan(&scan, t, mode) {
-                                    waiting.push_back(rs);
+                                    let previous = waiting.back().map(|w| w.t).or(*last_scan_t);
+                                    match previous.filter(|&p| rs.t <= p) {
+                                        Some(previous) => {
+                                            skipped.push_back(InputError::ScanOutOfOrder {
+                                                at: format!("recording byte {offset}"),
+                                                t: rs.t,
+                                                previous,
+                                            })
+                                        }
+                                        None => {
+                                            *last_scan_t = Some(rs.t);
+                                            waiting.push_back(rs);
+                                        }
+                                    }
                                 }
                             }
                         }
@@ -178,9 +208,9 @@ impl<R: Read> RecordingScans<R> {
                 }
                 Record::Odometry { t_us, x, y, theta } => {
                     let t = seconds(t_us);
+                    // A bad sample is skipped and reported; the track goes on.
                     if let Err(error) = self.odometry.push(t, Pose2::new(x, y, theta)) {
-                        self.ended = true;
-                        self.error = Some(InputError::RecordingOdometry {
+                        self.skipped.push_back(InputError::RecordingOdometry {
                             offset: self.records.offset(),
                             error,
                         });
@@ -197,6 +227,9 @@ impl<R: Read> Iterator for RecordingScans<R> {
 
     fn next(&mut self) -> Option<Self::Item> {
         loop {
+            if let Some(e) = self.skipped.pop_front() {
+                return Some(Err(e));
+            }
             if let Some(t) = self.waiting.front().map(|s| s.t) {
                 if self.ready(t) {
                     let scan = self.waiting.pop_front()?;
@@ -330,5 +363,81 @@ mod tests {
         assert!(items[0].as_ref().unwrap().odometry.is_none());
         let err = items[2].as_ref().unwrap_err().to_string();
         assert!(err.contains("truncated"), "{err}");
+    }
+
+    /// A recording of five scans a second apart with odometry around each;
+    /// the odometry at `bad_odometry` is NaN, and the scan record at
+    /// `flipped_scan` has a bit flipped.
+    fn damaged_recording(bad_odometry: Option<usize>, flipped_scan: Option<usize>) -> Vec<u8> {
+        let mut w = RecordingWriter::new(Vec::new()).unwrap();
+        let bytes = telegram(vec![1500; 181], Units::Cm);
+        let mut scan_records = Vec::new();
+        let mut len = lms200::recording::MAGIC.len();
+        let mut put = |w: &mut RecordingWriter<Vec<u8>>, r: Record| {
+            let before = len;
+            let mut one = RecordingWriter::new(Vec::new()).unwrap();
+            one.write(&r).unwrap();
+            len += one.into_inner().len() - lms200::recording::MAGIC.len();
+            w.write(&r).unwrap();
+            before..len
+        };
+        for i in 0..6i64 {
+            let x = if bad_odometry == Some(i as usize) {
+                f64::NAN
+            } else {
+                i as f64
+            };
+            put(
+                &mut w,
+                Record::Odometry {
+                    t_us: 1_000_000 * i + 500_000,
+                    x,
+                    y: 0.0,
+                    theta: 0.0,
+                },
+            );
+            if i < 5 {
+                scan_records.push(put(
+                    &mut w,
+                    Record::Rx {
+                        t_us: 1_000_000 * (i + 1),
+                        bytes: bytes.clone(),
+                    },
+                ));
+            }
+        }
+        let mut file = w.into_inner();
+        if let Some(k) = flipped_scan {
+            file[scan_records[k].start + 40] ^= 0x10;
+        }
+        file
+    }
+
+    #[test]
+    fn bad_odometry_and_damaged_records_are_skipped_and_reported() {
+        let items: Vec<_> = RecordingScans::new(damaged_recording(Some(2), Some(3)).as_slice())
+            .unwrap()
+            .collect();
+        let scans: Vec<&ScanRecord> = items.iter().filter_map(|i| i.as_ref().ok()).collect();
+        let errors: Vec<&InputError> = items.iter().filter_map(|i| i.as_ref().err()).collect();
+        assert_eq!(scans.len(), 4, "{items:?}");
+        assert_eq!(errors.len(), 2, "{errors:?}");
+        assert!(errors.iter().all(|e| e.is_skipped_item()), "{errors:?}");
+        assert!(matches!(
+            errors[0],
+            InputError::RecordingOdometry {
+                error: crate::input::OdometryError::NonFinitePose { .. },
+                ..
+            }
+        ));
+        assert!(matches!(
+            errors[1],
+            InputError::Recording(lms200::recording::RecordingError::Damaged { .. })
+        ));
+        // Every scan has finite odometry, interpolated across the bad sample.
+        for s in &scans {
+            let o = s.odometry.unwrap();
+            assert!(o.x.is_finite(), "{s:?}");
+        }
     }
 }

@@ -4,6 +4,13 @@
 //! Every reader yields [`ScanRecord`]s through the [`LogSource`] iterator
 //! interface, so the mapping pipeline does not care whether scans come from
 //! a CARMEN log or an LMS200 telegram recording.
+//!
+//! One policy for bad input in both: an item that cannot be used (a
+//! malformed line, an odometry sample that is not finite or goes back in
+//! time, a damaged recording record, a scan not after the previous one) is
+//! yielded as an error for which [`InputError::is_skipped_item`] holds, and
+//! the reader goes on with the next; the caller counts and reports them,
+//! or stops at the first (`--strict`). Other errors end the input.
 
 pub mod carmen;
 pub mod lms200;
@@ -51,6 +58,26 @@ pub enum InputError {
     Recording(#[from] ::lms200::recording::RecordingError),
     #[error("recording byte {offset}: {error}")]
     RecordingOdometry { offset: u64, error: OdometryError },
+    #[error("{at}: scan time {t} s is not after the previous scan's {previous} s")]
+    ScanOutOfOrder { at: String, t: f64, previous: f64 },
+}
+
+impl InputError {
+    /// Whether the reader skipped just the item this error names and goes
+    /// on (a malformed line, a bad odometry sample, a damaged recording
+    /// record, a scan out of time order), as opposed to an error that ends
+    /// the input.
+    pub fn is_skipped_item(&self) -> bool {
+        use ::lms200::recording::RecordingError;
+        matches!(
+            self,
+            InputError::Malformed { .. }
+                | InputError::Odometry { .. }
+                | InputError::RecordingOdometry { .. }
+                | InputError::ScanOutOfOrder { .. }
+                | InputError::Recording(RecordingError::Damaged { .. })
+        )
+    }
 }
 
 /// A stream of scans with odometry; implemented by every reader.

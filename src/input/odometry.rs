@@ -23,6 +23,8 @@ pub enum OdometryError {
     NonFiniteTime { t: f64 },
     #[error("odometry sample at {t} s is older than the previous one at {last} s")]
     OutOfOrder { t: f64, last: f64 },
+    #[error("odometry sample at {t} s has a non-finite pose")]
+    NonFinitePose { t: f64 },
 }
 
 /// A time-ordered run of odometry samples.
@@ -41,6 +43,9 @@ impl OdometryTrack {
     pub fn push(&mut self, t: f64, pose: Pose2) -> Result<(), OdometryError> {
         if !t.is_finite() {
             return Err(OdometryError::NonFiniteTime { t });
+        }
+        if !(pose.x.is_finite() && pose.y.is_finite() && pose.theta.is_finite()) {
+            return Err(OdometryError::NonFinitePose { t });
         }
         if let Some(last) = self.samples.last()
             && t < last.t

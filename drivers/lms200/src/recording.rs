@@ -23,11 +23,15 @@
 //! ```
 //!
 //! `t_us` is microseconds since the Unix epoch, the host's receive (or send)
-//! time of the chunk's last byte. A record whose length runs past the end of
-//! the file, or whose CRC does not match, ends the readable part: the reader
-//! reports the byte offset where the file broke and keeps everything before.
-//! Unknown kinds with a good CRC are skipped, so later versions can add kinds
-//! without breaking older readers.
+//! time of the chunk's last byte. A damaged record (its CRC does not match,
+//! its length is impossible, its payload does not fit its kind) is reported
+//! with its byte offset and skipped: the reader resynchronises on the next
+//! intact record (a known kind, a time within a day of the last good one, a
+//! matching CRC) and goes on, so a flipped bit costs one record, not the
+//! rest of the file. A record cut short by the end of the file (a killed
+//! recorder) ends it, reported as a truncation. Unknown kinds with a good
+//! CRC are skipped, so later versions can add kinds without breaking older
+//! readers.
 
 use std::io::{self, Read, Write};
 
@@ -110,6 +114,14 @@ pub enum RecordingError {
     Truncated { offset: u64, what: &'static str },
     #[error("recording corrupt at byte {offset}: {what}")]
     Corrupt { offset: u64, what: String },
+    #[error(
+        "recording damaged at byte {offset}: {what}; {skipped} bytes skipped to the next intact record"
+    )]
+    Damaged {
+        offset: u64,
+        skipped: u64,
+        what: String,
+    },
     #[error("payload of {len} bytes exceeds a recording write limit of {MAX_PAYLOAD} bytes")]
     PayloadTooLarge { len: usize },
     #[error(transparent)]
@@ -166,12 +178,82 @@ impl<W: Write> RecordingWriter<W> {
     }
 }
 
-/// Reads records one by one; after the first error it yields nothing more.
+/// Reads records one by one. A damaged stretch comes as one
+/// [`RecordingError::Damaged`] (or, when nothing intact follows it,
+/// [`RecordingError::Corrupt`] or [`RecordingError::Truncated`], after
+/// which nothing more comes); the records after it come as usual.
 #[derive(Debug)]
 pub struct RecordingReader<R: Read> {
     input: R,
+    /// Bytes read and not yet consumed; `buf[0]` is at file offset `offset`.
+    buf: Vec<u8>,
     offset: u64,
-    failed: bool,
+    eof: bool,
+    ended: bool,
+    /// Time of the last intact record, to tell a real record from noise.
+    last_t_us: Option<i64>,
+}
+
+/// What the bytes at one position are.
+enum Parse {
+    /// A record and the bytes it takes.
+    Record(Record, usize),
+    /// An intact record of a kind this version does not know.
+    Unknown(usize),
+    /// Not a record: why.
+    Bad(String),
+    /// This many bytes are needed to tell.
+    NeedMore(usize),
+}
+
+/// Known record kinds.
+const KINDS: std::ops::RangeInclusive<u8> = 1..=5;
+/// A resynchronisation candidate's time lies within this of the last
+/// intact record's (µs): a day.
+const RESYNC_WINDOW_US: i64 = 86_400_000_000;
+/// Skipped bytes are dropped from the buffer in chunks of this size while
+/// resynchronising, so a long damaged stretch is not held in memory.
+const RESYNC_CHUNK: usize = 1 << 16;
+
+fn decode_record(kind: u8, t_us: i64, payload: Vec<u8>) -> Result<Option<Record>, String> {
+    Ok(Some(match kind {
+        1 => Record::Rx {
+            t_us,
+            bytes: payload,
+        },
+        2 => Record::Tx {
+            t_us,
+            bytes: payload,
+        },
+        3 => {
+            let bytes: [u8; 4] = payload
+                .as_slice()
+                .try_into()
+                .map_err(|_| "baud record is not 4 bytes".to_string())?;
+            Record::Baud {
+                t_us,
+                baud: u32::from_le_bytes(bytes),
+            }
+        }
+        4 => {
+            if payload.len() != 24 {
+                return Err("odometry record is not 24 bytes".into());
+            }
+            let f = |i: usize| f64::from_le_bytes(copy_array(&payload[i * 8..i * 8 + 8]));
+            Record::Odometry {
+                t_us,
+                x: f(0),
+                y: f(1),
+                theta: f(2),
+            }
+        }
+        5 => Record::Note {
+            t_us,
+            text: String::from_utf8(payload).map_err(|_| "note is not UTF-8".to_string())?,
+        },
+        // A later version's record kind.
+        _ => return Ok(None),
+    }))
 }
 
 impl<R: Read> RecordingReader<R> {
@@ -187,8 +269,11 @@ impl<R: Read> RecordingReader<R> {
         }
         Ok(RecordingReader {
             input,
+            buf: Vec::new(),
             offset: MAGIC.len() as u64,
-            failed: false,
+            eof: false,
+            ended: false,
+            last_t_us: None,
         })
     }
 
@@ -197,108 +282,150 @@ impl<R: Read> RecordingReader<R> {
         self.offset
     }
 
-    /// The next record, `None` at a clean end of file.
+    /// The next record, `None` at the end of the file (or after damage
+    /// that reached it).
     pub fn next_record(&mut self) -> Option<Result<Record, RecordingError>> {
-        if self.failed {
+        if self.ended {
             return None;
         }
         let result = self.read_one().transpose();
-        if matches!(result, Some(Err(_))) {
-            self.failed = true;
+        if matches!(
+            result,
+            None | Some(Err(RecordingError::Truncated { .. }
+                | RecordingError::Corrupt { .. }
+                | RecordingError::Io(_)))
+        ) {
+            self.ended = true;
         }
         result
+    }
+
+    /// Reads until `buf` holds `n` bytes or the input ends; whether it does.
+    fn fill(&mut self, n: usize) -> io::Result<bool> {
+        let mut chunk = [0u8; 8192];
+        while self.buf.len() < n && !self.eof {
+            match self.input.read(&mut chunk) {
+                Ok(0) => self.eof = true,
+                Ok(k) => self.buf.extend_from_slice(&chunk[..k]),
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(self.buf.len() >= n)
+    }
+
+    fn consume(&mut self, n: usize) {
+        self.buf.drain(..n);
+        self.offset += n as u64;
+    }
+
+    /// What the bytes at `at` in the buffer are (reading more as needed).
+    fn parse_at(&mut self, at: usize) -> io::Result<Parse> {
+        if !self.fill(at + HEADER_LEN)? {
+            return Ok(Parse::NeedMore(at + HEADER_LEN));
+        }
+        let head: [u8; HEADER_LEN] = copy_array(&self.buf[at..at + HEADER_LEN]);
+        let kind = head[0];
+        let t_us = i64::from_le_bytes(copy_array(&head[1..9]));
+        let len = u32::from_le_bytes(copy_array(&head[9..13]));
+        if len > MAX_PAYLOAD {
+            return Ok(Parse::Bad(format!(
+                "record length {len} exceeds {MAX_PAYLOAD}"
+            )));
+        }
+        let total = HEADER_LEN + len as usize + 4;
+        if !self.fill(at + total)? {
+            return Ok(Parse::NeedMore(at + total));
+        }
+        let body = &self.buf[at..at + total - 4];
+        let crc = u32::from_le_bytes(copy_array(&self.buf[at + total - 4..at + total]));
+        if RECORD_CRC.checksum(body) != crc {
+            return Ok(Parse::Bad("record checksum mismatch".into()));
+        }
+        let payload = self.buf[at + HEADER_LEN..at + total - 4].to_vec();
+        Ok(match decode_record(kind, t_us, payload) {
+            Ok(Some(record)) => Parse::Record(record, total),
+            Ok(None) => Parse::Unknown(total),
+            Err(what) => Parse::Bad(what),
+        })
     }
 
     fn read_one(&mut self) -> Result<Option<Record>, RecordingError> {
         loop {
             let start = self.offset;
-            let mut head = [0u8; HEADER_LEN];
-            let n = read_full(&mut self.input, &mut head)?;
-            if n == 0 {
+            match self.parse_at(0)? {
+                Parse::Record(record, total) => {
+                    self.consume(total);
+                    self.last_t_us = Some(record.t_us());
+                    return Ok(Some(record));
+                }
+                Parse::Unknown(total) => self.consume(total),
+                Parse::NeedMore(_) if self.buf.is_empty() => return Ok(None),
+                Parse::NeedMore(n) => {
+                    let what = if n == HEADER_LEN {
+                        "record header cut short"
+                    } else {
+                        "record cut short"
+                    };
+                    // A length flipped to run past the end, or a real cut:
+                    // an intact record further on tells them apart.
+                    return match self.resync()? {
+                        Some(skipped) => Err(RecordingError::Damaged {
+                            offset: start,
+                            skipped,
+                            what: what.into(),
+                        }),
+                        None => Err(RecordingError::Truncated {
+                            offset: start,
+                            what,
+                        }),
+                    };
+                }
+                Parse::Bad(what) => {
+                    return match self.resync()? {
+                        Some(skipped) => Err(RecordingError::Damaged {
+                            offset: start,
+                            skipped,
+                            what,
+                        }),
+                        None => Err(RecordingError::Corrupt {
+                            offset: start,
+                            what,
+                        }),
+                    };
+                }
+            }
+        }
+    }
+
+    /// Skips to the next intact record after the damaged one at the front
+    /// of the buffer; the bytes skipped, or `None` (everything consumed)
+    /// when none follows.
+    fn resync(&mut self) -> io::Result<Option<u64>> {
+        let mut skipped = 0u64;
+        let mut at = 1;
+        loop {
+            if at >= RESYNC_CHUNK {
+                self.consume(at);
+                skipped += at as u64;
+                at = 0;
+            }
+            if !self.fill(at + HEADER_LEN)? {
+                let rest = self.buf.len();
+                self.consume(rest);
                 return Ok(None);
             }
-            if n < HEADER_LEN {
-                return Err(RecordingError::Truncated {
-                    offset: start,
-                    what: "record header cut short",
-                });
+            let kind = self.buf[at];
+            let t_us = i64::from_le_bytes(copy_array(&self.buf[at + 1..at + 9]));
+            let plausible = KINDS.contains(&kind)
+                && self
+                    .last_t_us
+                    .is_none_or(|last| t_us.abs_diff(last) <= RESYNC_WINDOW_US as u64);
+            if plausible && matches!(self.parse_at(at)?, Parse::Record(..)) {
+                self.consume(at);
+                return Ok(Some(skipped + at as u64));
             }
-            let kind = head[0];
-            let t_us = i64::from_le_bytes(copy_array(&head[1..9]));
-            let len = u32::from_le_bytes(copy_array(&head[9..13]));
-            if len > MAX_PAYLOAD {
-                return Err(RecordingError::Corrupt {
-                    offset: start,
-                    what: format!("record length {len} exceeds {MAX_PAYLOAD}"),
-                });
-            }
-            let mut payload = vec![0u8; len as usize];
-            if read_full(&mut self.input, &mut payload)? < payload.len() {
-                return Err(RecordingError::Truncated {
-                    offset: start,
-                    what: "record payload cut short",
-                });
-            }
-            let mut crc = [0u8; 4];
-            if read_full(&mut self.input, &mut crc)? < crc.len() {
-                return Err(RecordingError::Truncated {
-                    offset: start,
-                    what: "record checksum cut short",
-                });
-            }
-            let mut digest = RECORD_CRC.digest();
-            digest.update(&head);
-            digest.update(&payload);
-            if digest.finalize() != u32::from_le_bytes(crc) {
-                return Err(RecordingError::Corrupt {
-                    offset: start,
-                    what: "record checksum mismatch".into(),
-                });
-            }
-            self.offset = start + (HEADER_LEN + payload.len() + crc.len()) as u64;
-            let corrupt = |what: &str| RecordingError::Corrupt {
-                offset: start,
-                what: what.to_string(),
-            };
-            let record = match kind {
-                1 => Record::Rx {
-                    t_us,
-                    bytes: payload,
-                },
-                2 => Record::Tx {
-                    t_us,
-                    bytes: payload,
-                },
-                3 => {
-                    let bytes: [u8; 4] = payload
-                        .as_slice()
-                        .try_into()
-                        .map_err(|_| corrupt("baud record is not 4 bytes"))?;
-                    Record::Baud {
-                        t_us,
-                        baud: u32::from_le_bytes(bytes),
-                    }
-                }
-                4 => {
-                    if payload.len() != 24 {
-                        return Err(corrupt("odometry record is not 24 bytes"));
-                    }
-                    let f = |i: usize| f64::from_le_bytes(copy_array(&payload[i * 8..i * 8 + 8]));
-                    Record::Odometry {
-                        t_us,
-                        x: f(0),
-                        y: f(1),
-                        theta: f(2),
-                    }
-                }
-                5 => Record::Note {
-                    t_us,
-                    text: String::from_utf8(payload).map_err(|_| corrupt("note is not UTF-8"))?,
-                },
-                // A later version's record kind: skip it, its CRC was good.
-                _ => continue,
-            };
-            return Ok(Some(record));
+            at += 1;
         }
     }
 }
@@ -406,13 +533,32 @@ mod tests {
     }
 
     #[test]
-    fn bit_flip_is_reported_as_corruption() {
+    fn a_bit_flip_costs_one_record_and_is_reported() {
         let mut bytes = encode(&sample());
         bytes[8 + 13 + 3] ^= 0x01; // inside the first note's text
         let mut reader = RecordingReader::new(bytes.as_slice()).unwrap();
+        let first_len = encode(&sample()[..1]).len() - 8;
+        match reader.next_record() {
+            Some(Err(RecordingError::Damaged {
+                offset: 8, skipped, ..
+            })) => assert_eq!(skipped as usize, first_len),
+            other => panic!("{other:?}"),
+        }
+        let rest: Vec<Record> = reader.collect::<Result<_, _>>().unwrap();
+        assert_eq!(rest, sample()[1..].to_vec());
+    }
+
+    #[test]
+    fn damage_that_reaches_the_end_ends_the_file() {
+        let mut bytes = encode(&sample());
+        let last = bytes.len() - 5;
+        bytes[last] ^= 0x40;
+        let mut reader = RecordingReader::new(bytes.as_slice()).unwrap();
+        let items: Vec<_> = std::iter::from_fn(|| reader.next_record()).collect();
+        assert_eq!(items.len(), sample().len());
         assert!(matches!(
-            reader.next_record(),
-            Some(Err(RecordingError::Corrupt { offset: 8, .. }))
+            items.last(),
+            Some(Err(RecordingError::Corrupt { .. }))
         ));
     }
 
@@ -462,5 +608,67 @@ mod tests {
             reader.next_record(),
             Some(Err(RecordingError::Corrupt { .. }))
         ));
+    }
+
+    fn arbitrary_record() -> impl proptest::strategy::Strategy<Value = Record> {
+        use proptest::prelude::*;
+        let t = 1_700_000_000_000_000i64..1_700_000_100_000_000;
+        prop_oneof![
+            (t.clone(), proptest::collection::vec(any::<u8>(), 0..300))
+                .prop_map(|(t_us, bytes)| Record::Rx { t_us, bytes }),
+            (t.clone(), proptest::collection::vec(any::<u8>(), 0..40))
+                .prop_map(|(t_us, bytes)| Record::Tx { t_us, bytes }),
+            (t.clone(), any::<u32>()).prop_map(|(t_us, baud)| Record::Baud { t_us, baud }),
+            (t.clone(), -1e3..1e3f64, -1e3..1e3f64, -4.0..4.0f64)
+                .prop_map(|(t_us, x, y, theta)| Record::Odometry { t_us, x, y, theta }),
+            (t, "[a-z =/0-9.]{0,40}").prop_map(|(t_us, text)| Record::Note { t_us, text }),
+        ]
+    }
+
+    proptest::proptest! {
+        /// Random bit flips in some records and a cut anywhere: every
+        /// record untouched by either comes back, in order, and nothing
+        /// else does.
+        #[test]
+        fn flips_and_cuts_never_lose_an_intact_record(
+            records in proptest::collection::vec(arbitrary_record(), 1..25),
+            flips in proptest::collection::vec((0usize..25, 0usize..10_000, 0u8..8), 0..4),
+            cut in proptest::option::of(0usize..100_000),
+        ) {
+            let mut bytes = MAGIC.to_vec();
+            let mut spans = Vec::new();
+            for r in &records {
+                let start = bytes.len();
+                bytes.extend_from_slice(&encode(std::slice::from_ref(r))[8..]);
+                spans.push(start..bytes.len());
+            }
+            let mut damaged = vec![false; records.len()];
+            for (k, at, bit) in flips {
+                let k = k % records.len();
+                let span = spans[k].clone();
+                let i = span.start + at % span.len();
+                bytes[i] ^= 1 << bit;
+                damaged[k] = true;
+            }
+            let end = cut.map_or(bytes.len(), |c| MAGIC.len() + c % (bytes.len() - MAGIC.len() + 1));
+            let expected: Vec<Record> = records
+                .iter()
+                .zip(&spans)
+                .zip(&damaged)
+                .filter(|((_, span), d)| !**d && span.end <= end)
+                .map(|((r, _), _)| r.clone())
+                .collect();
+            let mut reader = RecordingReader::new(&bytes[..end]).unwrap();
+            let mut got = Vec::new();
+            let mut guard = 0;
+            while let Some(item) = reader.next_record() {
+                if let Ok(r) = item {
+                    got.push(r);
+                }
+                guard += 1;
+                proptest::prop_assert!(guard < 1000, "the reader does not end");
+            }
+            proptest::prop_assert_eq!(got, expected);
+        }
     }
 }
