@@ -20,7 +20,9 @@
 
 use crate::eval::{EvalError, RelationErrors, evaluate_relations as evaluate_against};
 use crate::geometry::{CogLine, LineExtractor, Pose2, wrap_angle};
-use crate::graph::{Correction, KeyframeGraph, LoopStats};
+use crate::graph::{
+    AppliedOptimisation, Correction, KeyframeGraph, LoopStats, OptimisationJob, OptimisationResult,
+};
 use crate::input::{InputError, ScanRecord, open_log};
 use crate::localize::global::GlobalConfig;
 use crate::localize::{
@@ -532,6 +534,17 @@ impl OfflineMapper {
     /// policy and the trajectory follow them, and
     /// the maps are rebuilt from the keyframes at their new poses.
     fn apply_correction(&mut self, c: &Correction) {
+        self.follow_correction(c);
+        self.map = self.graph.rebuild_walls(self.config.map);
+        self.cls_stale = true;
+        if !self.defer_cls_rebuild {
+            self.refresh_cls_map();
+        }
+    }
+
+    /// The predictor, the keyframe policy and the trajectory follow the
+    /// keyframes to their corrected poses.
+    fn follow_correction(&mut self, c: &Correction) {
         let poses = self.graph.poses();
         self.predictor.reframe(&c.correction);
         self.keyframes.reframe(&c.correction);
@@ -540,10 +553,58 @@ impl OfflineMapper {
                 *pose = poses[*k].compose(relative);
             }
         }
-        self.map = self.graph.rebuild_walls(self.config.map);
-        self.cls_stale = true;
-        if !self.defer_cls_rebuild {
-            self.refresh_cls_map();
+    }
+
+    /// Runs pose-graph optimisations as jobs taken with
+    /// [`take_optimisation`](Self::take_optimisation) (to run off the
+    /// real-time loop) instead of inside [`process`](Self::process).
+    pub fn set_background_optimisation(&mut self, on: bool) {
+        self.graph.set_background_optimisation(on);
+    }
+
+    /// The optimisation a closed loop asks for, if any and none is in
+    /// flight; run it anywhere ([`OptimisationJob::run`]) and hand the
+    /// result to [`apply_optimisation`](Self::apply_optimisation).
+    pub fn take_optimisation(&mut self) -> Option<OptimisationJob> {
+        self.graph.take_job(
+            self.config.map,
+            self.config.cls_map(),
+            &self.config.loop_closure,
+        )
+    }
+
+    /// Takes in an optimisation's result: keyframes, trajectory and
+    /// predictor move to the corrected poses, the walls and the CLS map
+    /// become the job's rebuild plus the keyframes taken since it started.
+    pub fn apply_optimisation(&mut self, result: OptimisationResult) {
+        let applied = match self.graph.apply_job(result) {
+            Ok(Some(applied)) => applied,
+            Ok(None) => return,
+            Err(e) => {
+                warn!("pose graph not optimised: {e}");
+                return;
+            }
+        };
+        self.follow_correction(&applied.correction);
+        let AppliedOptimisation {
+            mut walls,
+            mut cls,
+            covered,
+            ..
+        } = applied;
+        let poses = self.graph.poses();
+        for (kf, pose) in self.graph.keyframes().iter().zip(poses).skip(covered) {
+            walls.update(&kf.lines, pose, &kf.covariance);
+            if let Some(region) = &kf.region {
+                let _ = cls.add_keyframe(&kf.lines, region, *pose, kf.covariance);
+            }
+        }
+        self.map = walls;
+        if self.defer_cls_rebuild {
+            self.cls_stale = true;
+        } else {
+            self.cls = cls;
+            self.cls_stale = false;
         }
     }
 

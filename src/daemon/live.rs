@@ -111,6 +111,22 @@ impl LiveMapper {
         &self.mapper
     }
 
+    /// See [`OfflineMapper::set_background_optimisation`].
+    pub fn set_background_optimisation(&mut self, on: bool) {
+        self.mapper.set_background_optimisation(on);
+    }
+
+    /// See [`OfflineMapper::take_optimisation`].
+    pub fn take_optimisation(&mut self) -> Option<crate::graph::OptimisationJob> {
+        self.mapper.take_optimisation()
+    }
+
+    /// See [`OfflineMapper::apply_optimisation`].
+    pub fn apply_optimisation(&mut self, result: crate::graph::OptimisationResult) {
+        let _span = info_span!("apply_optimisation").entered();
+        self.mapper.apply_optimisation(result);
+    }
+
     pub fn latencies(&self) -> &Latencies {
         &self.latencies
     }

@@ -32,6 +32,7 @@ use super::sensor::{ScanSlot, SensorOptions, SensorReport, SensorThread};
 use super::simulation::{emulated_sensor, simulated_robot};
 use crate::error_chain;
 use crate::geometry::Pose2;
+use crate::graph::OptimisationResult;
 use crate::input::lms200::range_scan;
 use crate::sim::SimRobot;
 
@@ -660,8 +661,12 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     if let Some(w) = notifier.watchdog() {
         info!(interval_s = w.as_secs_f64(), "systemd watchdog enabled");
     }
+    // Loop-closure optimisations and rebuilds run on a blocking thread; the
+    // loop goes on localizing against the old map meanwhile.
+    let mut live = LiveMapper::new(config.mapper, exploration, 0.0);
+    live.set_background_optimisation(true);
     let mut d = Daemon {
-        live: LiveMapper::new(config.mapper, exploration, 0.0),
+        live,
         base: BaseDriver::new(
             rig.base,
             config.base.limits(),
@@ -691,6 +696,7 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     let mut checkpoint_tick = tick_every(d.config.daemon.checkpoint_interval.max(1.0));
     checkpoint_tick.reset();
     let mut writing: Option<JoinHandle<Result<(), CheckpointFailed>>> = None;
+    let mut optimising: Option<JoinHandle<OptimisationResult>> = None;
     let Hooks {
         shutdown: mut shutdown_signal,
         mut reload,
@@ -715,6 +721,24 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
                 let slot = scan_rx.borrow_and_update().clone();
                 if let Some(slot) = slot {
                     d.on_scan(&slot, &mut on_scan);
+                }
+                if optimising.is_none() {
+                    optimising = d
+                        .live
+                        .take_optimisation()
+                        .map(|job| tokio::task::spawn_blocking(move || job.run()));
+                }
+            }
+            result = async {
+                match optimising.as_mut() {
+                    Some(task) => task.await,
+                    None => std::future::pending().await,
+                }
+            } => {
+                optimising = None;
+                match result {
+                    Ok(result) => d.live.apply_optimisation(result),
+                    Err(e) => error!("the loop-closure optimiser failed: {e}"),
                 }
             }
             Some(report) = report_rx.recv() => d.on_report(&report),
@@ -748,6 +772,12 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     if let Some(task) = writing.take() {
         let result = task.await;
         d.checkpoint_done(result);
+    }
+    if let Some(task) = optimising.take() {
+        match task.await {
+            Ok(result) => d.live.apply_optimisation(result),
+            Err(e) => error!("the loop-closure optimiser failed: {e}"),
+        }
     }
     // Loops that agreed with the graph but were not optimised yet are
     // taken in before the last save.

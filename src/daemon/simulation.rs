@@ -151,7 +151,11 @@ impl VirtualRobot {
             t0,
             now: 0.0,
             line: VirtualLine::new(link, emulator, t0),
-            live: LiveMapper::new(config.mapper, exploration, 0.0),
+            live: {
+                let mut live = LiveMapper::new(config.mapper, exploration, 0.0);
+                live.set_background_optimisation(true);
+                live
+            },
             base: BaseDriver::new(
                 Some(BaseDriver::once(Box::new(robot.base()))),
                 config.base.limits(),
@@ -241,6 +245,13 @@ impl VirtualRobot {
             let outcome = self.live.on_scan(scan, None);
             self.last_scan_at = Some(self.now);
             self.score(t, outcome.pose);
+            // The daemon runs the optimisation on a blocking thread and
+            // takes the result in when it is done; here it is done at once,
+            // so runs stay deterministic on the virtual clock.
+            if let Some(job) = self.live.take_optimisation() {
+                let result = job.run();
+                self.live.apply_optimisation(result);
+            }
         }
         let sensor_ok = self
             .last_scan_at

@@ -75,6 +75,81 @@ pub struct KeyframeGraph {
     last_taken: Option<Pose2>,
     /// Keyframes taken, kept or merged: the voting cadence counts these.
     taken: usize,
+    /// Optimisations are handed out as [`OptimisationJob`]s to run off the
+    /// caller's thread instead of running inside [`Self::close_loop`].
+    background: bool,
+    /// A loop moved the map and no job has taken it in yet.
+    wants_optimisation: bool,
+    /// The job in flight: its id and how many keyframes it covers.
+    in_flight: Option<(u64, usize)>,
+    jobs: u64,
+}
+
+/// An optimisation of a snapshot of the graph, with the rebuild of the
+/// walls and the CLS map at the optimised poses: the long part of a loop
+/// closure (seconds on a large map), to run off the real-time loop while
+/// the mapper goes on localizing against the old map.
+#[derive(Debug, Clone)]
+pub struct OptimisationJob {
+    id: u64,
+    graph: PoseGraph,
+    keyframes: Vec<Arc<Keyframe>>,
+    optimizer: super::OptimizerConfig,
+    fusion: SegmentMapConfig,
+    cls: ClsMapConfig,
+    /// Indices of the loop edges no optimisation has taken in yet.
+    new_loops: Vec<usize>,
+}
+
+/// What a job gives back.
+#[derive(Debug)]
+pub struct OptimisationResult {
+    id: u64,
+    outcome: Result<(Vec<Pose2>, OptimizeReport, SegmentMap, ClsMap), GraphError>,
+    new_loops: Vec<usize>,
+    optimise_s: f64,
+    rebuild_s: f64,
+}
+
+impl OptimisationJob {
+    /// Optimises and rebuilds; runs anywhere, touches nothing but itself.
+    pub fn run(mut self) -> OptimisationResult {
+        let started = Instant::now();
+        let report = trace_span!("optimise").in_scope(|| self.graph.optimize(&self.optimizer));
+        let optimise_s = started.elapsed().as_secs_f64();
+        let started = Instant::now();
+        let outcome = report.map(|report| {
+            let poses = self.graph.poses().to_vec();
+            let mut walls = SegmentMap::new(self.fusion);
+            let mut cls = ClsMap::new(self.cls);
+            for (kf, pose) in self.keyframes.iter().zip(&poses) {
+                walls.update(&kf.lines, pose, &kf.covariance);
+                if let Some(region) = &kf.region {
+                    // A keyframe the CLS map refuses leaves it as it was.
+                    let _ = cls.add_keyframe(&kf.lines, region, *pose, kf.covariance);
+                }
+            }
+            (poses, report, walls, cls)
+        });
+        OptimisationResult {
+            id: self.id,
+            outcome,
+            new_loops: self.new_loops,
+            optimise_s,
+            rebuild_s: started.elapsed().as_secs_f64(),
+        }
+    }
+}
+
+/// A job's result taken in: the correction of the newest keyframe, the
+/// maps rebuilt for the keyframes the job covered, and from which
+/// keyframe on the caller must add the rest itself.
+#[derive(Debug)]
+pub struct AppliedOptimisation {
+    pub correction: Correction,
+    pub walls: SegmentMap,
+    pub cls: ClsMap,
+    pub covered: usize,
 }
 
 impl KeyframeGraph {
@@ -142,6 +217,107 @@ impl KeyframeGraph {
 
     pub fn stats(&self) -> &LoopStats {
         &self.stats
+    }
+
+    /// Hands optimisations out as jobs ([`Self::take_job`]) instead of
+    /// running them inside [`Self::close_loop`].
+    pub fn set_background_optimisation(&mut self, on: bool) {
+        self.background = on;
+    }
+
+    /// The optimisation a loop asked for, as a job covering the keyframes
+    /// so far, unless one is in flight; `fusion` and `cls` configure the
+    /// rebuild.
+    pub fn take_job(
+        &mut self,
+        fusion: SegmentMapConfig,
+        cls: ClsMapConfig,
+        cfg: &LoopClosureConfig,
+    ) -> Option<OptimisationJob> {
+        if !self.wants_optimisation || self.in_flight.is_some() {
+            return None;
+        }
+        self.jobs += 1;
+        let id = self.jobs;
+        let loops = self.graph.loop_edges().count();
+        let new_loops: Vec<usize> = self
+            .graph
+            .edges()
+            .iter()
+            .enumerate()
+            .filter(|(_, e)| e.kind == EdgeKind::Loop)
+            .map(|(i, _)| i)
+            .skip(loops.saturating_sub(self.unoptimised_loops))
+            .collect();
+        self.wants_optimisation = false;
+        self.unoptimised_loops = 0;
+        self.in_flight = Some((id, self.keyframes.len()));
+        Some(OptimisationJob {
+            id,
+            graph: self.graph.clone(),
+            keyframes: self.keyframes.clone(),
+            optimizer: cfg.optimizer,
+            fusion,
+            cls,
+            new_loops,
+        })
+    }
+
+    /// Takes in a job's result: the keyframes it covered get their
+    /// optimised poses, later ones follow the last of them rigidly. A
+    /// result of a job no longer in flight (superseded by [`Self::settle`])
+    /// is ignored (`Ok(None)`). A failed optimisation drops the loops it
+    /// was for, so later ones do not fail on them too.
+    pub fn apply_job(
+        &mut self,
+        result: OptimisationResult,
+    ) -> Result<Option<AppliedOptimisation>, GraphError> {
+        let Some((id, covered)) = self.in_flight else {
+            return Ok(None);
+        };
+        if id != result.id {
+            return Ok(None);
+        }
+        self.in_flight = None;
+        self.stats.optimise_s += result.optimise_s;
+        self.stats.rebuild_s += result.rebuild_s;
+        let (optimised, report, walls, cls) = match result.outcome {
+            Ok(parts) => parts,
+            Err(e) => {
+                self.graph.remove_edges(&result.new_loops);
+                self.stats.accepted = self.stats.accepted.saturating_sub(result.new_loops.len());
+                return Err(e);
+            }
+        };
+        let old = self.graph.poses().to_vec();
+        let Some(last) = covered.checked_sub(1) else {
+            return Ok(None);
+        };
+        if optimised.len() != covered || old.len() < covered {
+            return Err(GraphError::Inconsistent(format!(
+                "a job over {covered} keyframes gave {} poses for a graph of {}",
+                optimised.len(),
+                old.len()
+            )));
+        }
+        let mut poses = optimised.clone();
+        for pose in &old[covered..] {
+            poses.push(optimised[last].compose(&old[last].between(pose)));
+        }
+        let newest = old.len() - 1;
+        let correction = poses[newest].compose(&old[newest].inverse());
+        self.graph.set_poses(poses);
+        if let Some(p) = &mut self.last_taken {
+            *p = correction.compose(p);
+        }
+        self.stats.optimisations += 1;
+        self.stats.down_weighted = report.loops_down_weighted;
+        Ok(Some(AppliedOptimisation {
+            correction: Correction { correction, report },
+            walls,
+            cls,
+            covered,
+        }))
     }
 
     /// Adds `keyframe` at `pose` with a chain edge from the previous one
@@ -256,6 +432,10 @@ impl KeyframeGraph {
         self.graph.add_edge(edge)?;
         self.unoptimised_loops += 1;
         self.last_loop_keyframe = Some(current);
+        if self.background {
+            self.wants_optimisation = true;
+            return Ok(None);
+        }
         match self.optimise(cfg) {
             Ok(c) => Ok(Some(c)),
             Err(e) => {
@@ -278,7 +458,9 @@ impl KeyframeGraph {
     /// nearest such), if it was dropped.
     pub fn merge_revisit(&mut self, cfg: &LoopClosureConfig) -> Option<usize> {
         let newest = self.keyframes.len().checked_sub(1)?;
-        if !self.newest_agrees {
+        // A keyframe a job in flight covers stays: its result is indexed
+        // by keyframe.
+        if !self.newest_agrees || self.in_flight.is_some_and(|(_, n)| newest < n) {
             return None;
         }
         let poses = self.graph.poses();
@@ -316,10 +498,13 @@ impl KeyframeGraph {
     /// Optimises once more if loop edges came in since the last
     /// optimisation (the end of a run); the correction of the newest
     /// keyframe when the poses moved.
+    /// A job in flight is superseded: its result will be ignored.
     pub fn settle(&mut self, cfg: &LoopClosureConfig) -> Result<Option<Correction>, GraphError> {
-        if self.unoptimised_loops == 0 {
+        let superseded = self.in_flight.take().is_some();
+        if self.unoptimised_loops == 0 && !self.wants_optimisation && !superseded {
             return Ok(None);
         }
+        self.wants_optimisation = false;
         self.optimise(cfg).map(Some)
     }
 

@@ -27,7 +27,9 @@ mod keyframes;
 pub use closure::{
     LoopClosureConfig, LoopMatch, LoopQuery, LoopRejection, close_loop, loop_candidates,
 };
-pub use keyframes::{Correction, KeyframeGraph, LoopStats};
+pub use keyframes::{
+    AppliedOptimisation, Correction, KeyframeGraph, LoopStats, OptimisationJob, OptimisationResult,
+};
 
 use crate::geometry::{Pose2, wrap_angle};
 use nalgebra::{DMatrix, Matrix3, Vector3};
@@ -223,6 +225,16 @@ impl PoseGraph {
     /// Removes the newest edge.
     pub fn pop_edge(&mut self) -> Option<Edge> {
         self.edges.pop()
+    }
+
+    /// Removes the edges at `indices` (positions in [`Self::edges`]).
+    pub fn remove_edges(&mut self, indices: &[usize]) {
+        let mut k = 0;
+        self.edges.retain(|_| {
+            let keep = !indices.contains(&k);
+            k += 1;
+            keep
+        });
     }
 
     /// Replaces every pose estimate (a rollback); ignored unless the count
