@@ -17,6 +17,15 @@ use std::path::{Path, PathBuf};
 /// followed: it makes the creation fail, or is simply not the name
 /// chosen, and no file elsewhere is written or truncated.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    write_atomically_with(path, |f| f.write_all(bytes))
+}
+
+/// [`write_atomically`] of what `write` writes to the temporary file, so
+/// a large file streams to disk instead of being built in memory first.
+pub fn write_atomically_with(
+    path: &Path,
+    write: impl FnOnce(&mut dyn Write) -> io::Result<()>,
+) -> io::Result<()> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),
@@ -29,7 +38,7 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> io::Result<()> {
     prefix.push(".tmp-");
     // Dropping the temporary file on an error path removes it.
     let mut tmp = tempfile::Builder::new().prefix(&prefix).tempfile_in(&dir)?;
-    tmp.write_all(bytes)?;
+    write(tmp.as_file_mut())?;
     tmp.as_file().sync_all()?;
     tmp.persist(path).map_err(|e| e.error)?;
     File::open(&dir).and_then(|d| d.sync_all())

@@ -2,8 +2,8 @@
 //!
 //! ```json
 //! {"format":"clsmap-map","version":2,"frame":"map","created_by":"clsmap 0.1.0",
-//!  "checksum":123456789,
-//!  "payload":{"segments":[...],"walls":[...],"keyframes":[...],"edges":[...]}}
+//!  "payload":{"segments":[...],"walls":[...],"keyframes":[...],"edges":[...]},
+//!  "checksum":123456789}
 //! ```
 //!
 //! - `segments`: the CLS map's CLSM_Item list, as in version 1.
@@ -17,10 +17,13 @@
 //!
 //! Metres, radians, map frame. `checksum` is the CRC-32 of the bytes of
 //! `payload` exactly as stored; the payload is parsed from exactly those
-//! bytes, so no edit reaches the map unchecked. Files are written
-//! atomically (see [`crate::durable`]). Version 1 files (the CLS map only)
+//! bytes, so no edit reaches the map unchecked. It comes last so the
+//! payload streams to the file as it is serialised (a large map is never
+//! held as text in memory). Files are written atomically (see
+//! [`crate::durable`]). Version 1 files (the CLS map only)
 //! still load, with no walls or keyframes.
 
+use std::io::Write as _;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -29,7 +32,7 @@ use serde::{Deserialize, Serialize};
 
 use super::cls::loops::ClsmItem;
 use super::cls::store::{
-    self, SegmentRecord, StoreError, crc32, io_error_at, parse_error, record,
+    self, SegmentRecord, StoreError, crc32, crc32_digest, io_error_at, parse_error, record,
     shapes_from_checked_records,
 };
 use super::cls::{ClsMap, ClsMapConfig, LocalEdge, LocalRegion, LocalSource};
@@ -43,7 +46,7 @@ pub const FORMAT: &str = "clsmap-map";
 pub const VERSION: u32 = 2;
 
 /// One keyframe as stored.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct KeyframeRecord {
     t: f64,
@@ -54,10 +57,51 @@ struct KeyframeRecord {
     region: Option<RegionRecord>,
 }
 
+/// The same, borrowed from a keyframe for writing (a checkpoint of a
+/// large map copies no scan).
+#[derive(Serialize)]
+struct KeyframeView<'a> {
+    t: f64,
+    pose: &'a Pose2,
+    covariance: &'a [[f64; 3]; 3],
+    travelled: f64,
+    lines: &'a [CogLine],
+    region: Option<RegionView<'a>>,
+}
+
+/// [`RegionRecord`] borrowed: vertices and line indices straight from the
+/// region's edges.
+struct RegionView<'a>(&'a LocalRegion);
+
+impl Serialize for RegionView<'_> {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct;
+        struct Points<'a>(&'a LocalRegion);
+        impl Serialize for Points<'_> {
+            fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                s.collect_seq(self.0.edges.iter().map(|e| e.start))
+            }
+        }
+        struct Lines<'a>(&'a LocalRegion);
+        impl Serialize for Lines<'_> {
+            fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                s.collect_seq(self.0.edges.iter().map(|e| match e.source {
+                    LocalSource::Actual(i) => Some(i),
+                    LocalSource::Virtual => None,
+                }))
+            }
+        }
+        let mut st = serializer.serialize_struct("RegionRecord", 2)?;
+        st.serialize_field("points", &Points(self.0))?;
+        st.serialize_field("lines", &Lines(self.0))?;
+        st.end()
+    }
+}
+
 /// A local region as its closed polygon: vertex `i` starts edge `i`, and
 /// `lines[i]` is the scan line edge `i` lies on (`null` for a virtual
 /// edge). Half the size of edges with both ends, for the same polygon.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RegionRecord {
     points: Vec<[f64; 2]>,
@@ -65,20 +109,6 @@ struct RegionRecord {
 }
 
 impl RegionRecord {
-    fn new(region: &LocalRegion) -> Self {
-        RegionRecord {
-            points: region.edges.iter().map(|e| e.start).collect(),
-            lines: region
-                .edges
-                .iter()
-                .map(|e| match e.source {
-                    LocalSource::Actual(i) => Some(i),
-                    LocalSource::Virtual => None,
-                })
-                .collect(),
-        }
-    }
-
     fn region(&self) -> LocalRegion {
         let n = self.points.len();
         LocalRegion {
@@ -109,12 +139,21 @@ struct EdgeRecord {
     information: [[f64; 3]; 3],
 }
 
-#[derive(Debug, Serialize, Deserialize)]
+#[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Payload {
     segments: Vec<SegmentRecord>,
     walls: Vec<MapSegment>,
     keyframes: Vec<KeyframeRecord>,
+    edges: Vec<EdgeRecord>,
+}
+
+/// [`Payload`] borrowed from a map's contents, for writing.
+#[derive(Serialize)]
+struct PayloadView<'a> {
+    segments: Vec<SegmentRecord>,
+    walls: &'a [MapSegment],
+    keyframes: Vec<KeyframeView<'a>>,
     edges: Vec<EdgeRecord>,
 }
 
@@ -124,7 +163,6 @@ struct Header<'a> {
     version: u32,
     frame: &'a str,
     created_by: &'a str,
-    checksum: u32,
 }
 
 #[derive(Deserialize)]
@@ -174,23 +212,23 @@ fn matrix(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
     std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
 }
 
-/// The file text for `contents`.
-pub fn encode(contents: &MapContents) -> Result<String, serde_json::Error> {
+/// The payload of `contents` as stored, compact JSON, into `out`.
+fn write_payload(out: &mut impl std::io::Write, contents: &MapContents) -> std::io::Result<()> {
     let items: Vec<ClsmItem> = contents.cls.items();
-    let payload = Payload {
+    let payload = PayloadView {
         segments: items.iter().map(record).collect(),
-        walls: contents.walls.clone(),
+        walls: &contents.walls,
         keyframes: contents
             .keyframes
             .iter()
             .zip(&contents.poses)
-            .map(|(k, pose)| KeyframeRecord {
+            .map(|(k, pose)| KeyframeView {
                 t: k.t,
-                pose: *pose,
-                covariance: k.covariance,
+                pose,
+                covariance: &k.covariance,
                 travelled: k.travelled,
-                lines: k.lines.clone(),
-                region: k.region.as_ref().map(RegionRecord::new),
+                lines: &k.lines,
+                region: k.region.as_ref().map(RegionView),
             })
             .collect(),
         edges: contents
@@ -205,23 +243,65 @@ pub fn encode(contents: &MapContents) -> Result<String, serde_json::Error> {
             })
             .collect(),
     };
-    let body = serde_json::to_string(&payload)?;
+    serde_json::to_writer(out, &payload).map_err(std::io::Error::other)
+}
+
+/// The file's first part, up to the payload.
+fn header_bytes() -> Result<Vec<u8>, serde_json::Error> {
     let header = serde_json::to_string(&Header {
         format: FORMAT,
         version: VERSION,
         frame: "map",
         created_by: concat!("clsmap ", env!("CARGO_PKG_VERSION")),
-        checksum: crc32(body.as_bytes()),
     })?;
-    // `header` is a JSON object: open it up and append the payload last.
+    // `header` is a JSON object: open it up for the payload.
     let open = header.strip_suffix('}').unwrap_or(&header);
-    Ok(format!("{open},\n\"payload\":{body}}}\n"))
+    Ok(format!("{open},\n\"payload\":").into_bytes())
+}
+
+/// Passes bytes on and keeps their CRC-32.
+struct Checksummed<W> {
+    inner: W,
+    digest: crc::Digest<'static, u32>,
+}
+
+impl<W: std::io::Write> std::io::Write for Checksummed<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.digest.update(&buf[..n]);
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
+}
+
+/// Writes the whole file for `contents` to `out`.
+fn write_file(out: &mut dyn std::io::Write, contents: &MapContents) -> std::io::Result<()> {
+    let mut out = std::io::BufWriter::new(out);
+    out.write_all(&header_bytes()?)?;
+    let mut payload = Checksummed {
+        inner: &mut out,
+        digest: crc32_digest(),
+    };
+    write_payload(&mut payload, contents)?;
+    let checksum = payload.digest.finalize();
+    write!(out, ",\n\"checksum\":{checksum}}}\n")?;
+    out.flush()
+}
+
+/// The file text for `contents`.
+pub fn encode(contents: &MapContents) -> Result<String, StoreError> {
+    let mut text = Vec::new();
+    write_file(&mut text, contents).map_err(|e| StoreError::Encode(e.to_string()))?;
+    String::from_utf8(text).map_err(|e| StoreError::Encode(e.to_string()))
 }
 
 /// Writes `contents` to `path` atomically.
 pub fn save(path: &Path, contents: &MapContents) -> Result<(), StoreError> {
-    let text = encode(contents).map_err(StoreError::Parse)?;
-    crate::durable::write_atomically(path, text.as_bytes()).map_err(io_error_at(path))
+    crate::durable::write_atomically_with(path, |out| write_file(out, contents))
+        .map_err(io_error_at(path))
 }
 
 /// Reads a map file of either version; a corrupt, truncated, foreign or
@@ -476,19 +556,21 @@ mod tests {
         assert!(back.contents.walls.is_empty() && back.contents.keyframes.is_empty());
     }
 
-    /// `text` with its payload replaced by `payload` and a checksum that
-    /// matches it: a consistent-looking file with whatever content.
-    fn with_payload(text: &str, payload: &str) -> String {
-        let at = text.find("\"payload\":").unwrap();
-        let header = &text[..at];
-        let c = header.find("\"checksum\":").unwrap() + "\"checksum\":".len();
-        let end = c + header[c..].find(',').unwrap();
+    /// A file with `payload` and a checksum that matches it: a
+    /// consistent-looking file with whatever content.
+    fn with_payload(payload: &str) -> String {
+        let header = String::from_utf8(header_bytes().unwrap()).unwrap();
         format!(
-            "{}{}{}\"payload\":{payload}}}\n",
-            &header[..c],
-            crc32(payload.as_bytes()),
-            &header[end..]
+            "{header}{payload},\n\"checksum\":{}}}\n",
+            crc32(payload.as_bytes())
         )
+    }
+
+    /// The payload of `text` as stored.
+    fn payload_of(text: &str) -> &str {
+        let start = text.find("\"payload\":").unwrap() + "\"payload\":".len();
+        let end = text.rfind(",\n\"checksum\":").unwrap();
+        &text[start..end]
     }
 
     #[test]
@@ -502,7 +584,7 @@ mod tests {
         ));
         // Zero checksum, escaped key, edited numbers: still a mismatch.
         let at = text.find("\"checksum\":").unwrap() + "\"checksum\":".len();
-        let end = at + text[at..].find(',').unwrap();
+        let end = at + text[at..].find('}').unwrap();
         let forged = format!("{}0{}", &text[..at], &text[end..])
             .replace("\"payload\"", "\"p\\u0061yload\"")
             .replacen("0.005", "0.5", 1);
@@ -515,33 +597,29 @@ mod tests {
         let foreign = text.replacen("clsmap-map", "someone-else", 1);
         assert!(matches!(decode(&foreign), Err(StoreError::Format(_))));
 
-        let raw = &text[text.find("\"payload\":").unwrap() + 10..text.len() - 2];
-        let bad_edge = with_payload(&text, &raw.replacen("\"to\":1", "\"to\":9", 1));
+        let raw = payload_of(&text);
+        assert_eq!(decode(&with_payload(raw)).unwrap().version, 2);
+        let bad_edge = with_payload(&raw.replacen("\"to\":1", "\"to\":9", 1));
         match decode(&bad_edge) {
             Err(StoreError::Inconsistent(why)) => assert!(why.contains("edge 0"), "{why}"),
             other => panic!("{other:?}"),
         }
-        let bad_source = with_payload(&text, &raw.replacen("\"lines\":[0,", "\"lines\":[5,", 1));
+        let bad_source = with_payload(&raw.replacen("\"lines\":[0,", "\"lines\":[5,", 1));
         match decode(&bad_source) {
             Err(StoreError::Inconsistent(why)) => assert!(why.contains("keyframe 0"), "{why}"),
             other => panic!("{other:?}"),
         }
-        let twice = with_payload(&text, &raw.replacen("\"id\":3", "\"id\":3},{\"id\":3,\"observations\":1,\"line\":{\"theta\":0.0,\"xc\":0.0,\"yc\":0.0,\"sigma_theta\":0.1,\"sigma_c\":0.1,\"start\":[0.0,0.0],\"end\":[1.0,0.0],\"n_points\":5}", 1));
+        let twice = with_payload(&raw.replacen("\"id\":3", "\"id\":3},{\"id\":3,\"observations\":1,\"line\":{\"theta\":0.0,\"xc\":0.0,\"yc\":0.0,\"sigma_theta\":0.1,\"sigma_c\":0.1,\"start\":[0.0,0.0],\"end\":[1.0,0.0],\"n_points\":5}", 1));
         assert!(decode(&twice).is_err());
-        let negative = with_payload(
-            &text,
-            &raw.replacen("\"information\":[[10000.0", "\"information\":[[-10000.0", 1),
-        );
+        let negative = with_payload(&raw.replacen(
+            "\"information\":[[10000.0",
+            "\"information\":[[-10000.0",
+            1,
+        ));
         match decode(&negative) {
             Err(StoreError::Inconsistent(why)) => assert!(why.contains("semi-definite"), "{why}"),
             other => panic!("{other:?}"),
         }
-        assert!(
-            decode(&with_payload(
-                &text,
-                &raw.replacen("\"t\":1.0", "\"t\":1e999", 1)
-            ))
-            .is_err()
-        );
+        assert!(decode(&with_payload(&raw.replacen("\"t\":1.0", "\"t\":1e999", 1))).is_err());
     }
 }

@@ -33,7 +33,7 @@ pub const FORMAT: &str = "clsmap-cls";
 /// The only version this build reads and writes.
 pub const VERSION: u32 = 1;
 
-const CRC32: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
+static CRC32: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
 
 /// One CLSM_Item as stored.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -103,6 +103,8 @@ pub enum StoreError {
     Invariant(InvariantError),
     #[error("the stored map is inconsistent: {0}")]
     Inconsistent(String),
+    #[error("cannot encode the map: {0}")]
+    Encode(String),
 }
 
 fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> StoreError + '_ {
@@ -114,6 +116,11 @@ fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> StoreError + '_ {
 
 pub(crate) fn io_error_at(path: &Path) -> impl FnOnce(std::io::Error) -> StoreError + '_ {
     io_error(path)
+}
+
+/// A running CRC-32 of the same kind, for bytes written in pieces.
+pub(crate) fn crc32_digest() -> crc::Digest<'static, u32> {
+    CRC32.digest()
 }
 
 pub(crate) fn crc32(bytes: &[u8]) -> u32 {
