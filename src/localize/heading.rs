@@ -93,7 +93,8 @@ pub fn heading_candidates(
 /// (`cfg.heading_search` of them): the fix with the most matches (then
 /// the lowest χ²) whose jump from `predicted` is within the limits, or the
 /// first error. A searched heading needs one match more than
-/// `cfg.min_matches`, since it was chosen to make lines match.
+/// `cfg.min_matches`, since it was chosen to make lines match, and must
+/// leave no direction unconstrained.
 pub fn localize_searching_heading(
     local: &[CogLine],
     map: &SegmentIndex,
@@ -125,7 +126,11 @@ pub fn localize_searching_heading(
         };
         let dx = (fix.pose.x - predicted.x).hypot(fix.pose.y - predicted.y);
         let dtheta = wrap_angle(fix.pose.theta - predicted.theta).abs();
-        if fix.matches.len() <= cfg.min_matches || dx > cfg.max_translation_jump || dtheta > limit {
+        if fix.matches.len() <= cfg.min_matches
+            || fix.degenerate.is_some()
+            || dx > cfg.max_translation_jump
+            || dtheta > limit
+        {
             continue;
         }
         let better = best.as_ref().is_none_or(|b| {
