@@ -41,8 +41,10 @@ use std::time::{Duration, Instant};
 use thiserror::Error;
 
 mod prediction;
+mod start;
 
 pub use prediction::{MotionPredictor, OdometryFeed, OdometryReading, Prediction};
+pub use start::{MapMode, StartSearch};
 use tracing::{debug, trace_span, warn};
 
 /// Name of the trajectory written by [`run_offline_mapping`].
@@ -71,6 +73,8 @@ pub enum PipelineError {
     Json(#[from] serde_json::Error),
     #[error("cannot save the map")]
     Store(#[from] crate::map::cls::StoreError),
+    #[error("cannot start from the map: {0}")]
+    StartMap(String),
 }
 
 /// What happened to one scan.
@@ -176,6 +180,10 @@ pub struct MappingSummary {
     pub skipped_examples: Vec<String>,
     /// Scans whose odometry was not finite: mapped as scans without it.
     pub scans_with_bad_odometry: usize,
+    /// Scans before the robot was found in a loaded map (no pose).
+    pub scans_before_start: usize,
+    /// Times the robot was found again in a loaded map after it was lost.
+    pub relocalizations: usize,
     /// Keyframes whose CLS map update was refused (the map kept as it was).
     pub cls_rejected: usize,
     /// Scans that carried no odometry.
@@ -266,9 +274,28 @@ pub struct OfflineMapper {
     anchor_keyframe: Option<usize>,
     /// Whether the previous scan's fix was refused as an implausible jump.
     previous_refused_jump: bool,
+    /// A loaded map's mode, the search for the start pose in it, the pose
+    /// found (for the next scan's prediction), and whether the session's
+    /// first keyframe is still to come.
+    mode: Option<MapMode>,
+    start: Option<StartSearch>,
+    seed: Option<(Pose2, [[f64; 3]; 3])>,
+    first_session_keyframe: bool,
+    /// Scans in a row not localized against the loaded map, and the search
+    /// that runs once there are [`LOST_AFTER_SCANS`].
+    lost_scans: usize,
+    relocalizer: Option<StartSearch>,
     summary: MappingSummary,
     clocks: [StageClock; 6],
 }
+
+/// Scans in a row without a fix against a loaded map after which the
+/// robot is taken as lost and looked for again (about a second of scans at
+/// a walking pace's keyframe spacing; a few scans of a featureless stretch
+/// are normal).
+const LOST_AFTER_SCANS: usize = 5;
+/// While lost, global localization runs on every this many scans.
+const RELOCALIZE_EVERY_SCANS: usize = 5;
 
 const PREDICT: usize = 0;
 const EXTRACT: usize = 1;
@@ -296,9 +323,59 @@ impl OfflineMapper {
             cls_stale: false,
             anchor_keyframe: None,
             previous_refused_jump: false,
+            mode: None,
+            start: None,
+            seed: None,
+            first_session_keyframe: false,
+            lost_scans: 0,
+            relocalizer: None,
             summary: MappingSummary::default(),
             clocks: [StageClock::default(); 6],
         }
+    }
+
+    /// A mapper that goes on from a saved map (see [`crate::map::file`]):
+    /// the first scans find the robot in it ([`StartSearch`]); then it
+    /// localizes against the map's walls, and in [`MapMode::Extend`] adds
+    /// keyframes to the map's graph and closes loops against it. A map
+    /// without keyframes (version 1) can be localized in, not extended.
+    pub fn from_map(
+        config: MapperConfig,
+        contents: MapContents,
+        mode: MapMode,
+    ) -> Result<Self, PipelineError> {
+        let mut mapper = OfflineMapper::new(config);
+        let walls: Vec<CogLine> = if contents.walls.is_empty() {
+            contents.cls.actual_segments().map(|s| s.line).collect()
+        } else {
+            contents.walls.iter().map(|w| w.line).collect()
+        };
+        if walls.is_empty() {
+            return Err(PipelineError::StartMap("the map has no walls".into()));
+        }
+        mapper.map = if contents.walls.is_empty() {
+            let mut map = SegmentMap::new(config.map);
+            map.insert_walls(&walls);
+            map
+        } else {
+            SegmentMap::from_walls(config.map, &contents.walls)
+                .ok_or_else(|| PipelineError::StartMap("the map repeats a wall id".into()))?
+        };
+        if mode == MapMode::Extend && contents.keyframes.is_empty() {
+            return Err(PipelineError::StartMap(
+                "the map holds no keyframes (a version 1 file): it can be localized in, not extended".into(),
+            ));
+        }
+        // Loaded in either mode, so the map written at the end is the map
+        // loaded (and, extended, more).
+        mapper.graph =
+            KeyframeGraph::from_parts(contents.keyframes, contents.poses, contents.edges)
+                .map_err(|e| PipelineError::StartMap(e.to_string()))?;
+        mapper.first_session_keyframe = mode == MapMode::Extend;
+        mapper.cls = contents.cls.with_config(config.cls_map());
+        mapper.start = Some(StartSearch::new(walls, GlobalConfig::default()));
+        mapper.mode = Some(mode);
+        Ok(mapper)
     }
 
     pub fn config(&self) -> &MapperConfig {
@@ -632,6 +709,34 @@ impl OfflineMapper {
         if odometry.is_none() {
             self.summary.scans_without_odometry += 1;
         }
+        if let Some(search) = &mut self.start {
+            self.extractor.extract(
+                &record.scan,
+                &self.config.laser_mount,
+                &self.config.extraction,
+                &mut self.lines,
+            );
+            match search.step(&self.lines, odometry) {
+                Some(found) => {
+                    debug!(t = record.scan.t, pose = ?found.0, "found in the map");
+                    self.start = None;
+                    self.seed = Some(found);
+                }
+                None => {
+                    self.summary.scans_before_start += 1;
+                    return ScanOutcome {
+                        pose: Pose2::IDENTITY,
+                        localized: false,
+                        degenerate: false,
+                        keyframe: false,
+                        lines: self.lines.len(),
+                        matches: 0,
+                        rejection: Some("NotFoundInTheMapYet".to_owned()),
+                        by_previous_scan: false,
+                    };
+                }
+            }
+        }
 
         let t = Instant::now();
         let prediction = trace_span!("predict").in_scope(|| {
@@ -641,7 +746,12 @@ impl OfflineMapper {
             }
             self.predictor.predict(reading, &self.config.odometry)
         });
-        let (predicted, predicted_cov) = (prediction.pose, prediction.cov);
+        // The first scan after the robot was found in a loaded map starts
+        // from where it was found.
+        let (predicted, predicted_cov) = match self.seed.take() {
+            Some(found) => found,
+            None => (prediction.pose, prediction.cov),
+        };
         self.clocks[PREDICT].add(t.elapsed());
 
         let t = Instant::now();
@@ -723,11 +833,46 @@ impl OfflineMapper {
             }
         }
 
+        // In a loaded map, a robot that has not been localized against the
+        // map for a while (pushed aside, or drifted through a stretch the
+        // map shows little of) is looked for again by global localization
+        // while it goes on; once one place remains, that is its pose.
+        if self.mode.is_some() {
+            if outcome.localized && !outcome.by_previous_scan {
+                self.lost_scans = 0;
+                self.relocalizer = None;
+            } else {
+                self.lost_scans += 1;
+            }
+            if self.lost_scans >= LOST_AFTER_SCANS && self.relocalizer.is_none() {
+                debug!(
+                    t = record.scan.t,
+                    "lost in the map: global localization again"
+                );
+                let walls = self.map.index().iter().map(|(_, l)| *l);
+                self.relocalizer = Some(StartSearch::new(walls, GlobalConfig::default()));
+            }
+            // A search costs milliseconds on a large map: every few scans.
+            let due = self.lost_scans % RELOCALIZE_EVERY_SCANS == 0;
+            if let Some(search) = self.relocalizer.as_mut().filter(|_| due)
+                && let Some((pose, found_cov)) = search.step(&self.lines, odometry)
+            {
+                debug!(t = record.scan.t, ?pose, "found in the map again");
+                self.relocalizer = None;
+                self.lost_scans = 0;
+                self.summary.relocalizations += 1;
+                outcome.pose = pose;
+                outcome.localized = true;
+                cov = found_cov;
+            }
+        }
+
         // Nor does an unlocalized pose predicted without fresh odometry:
         // constant velocity is a guess, and frozen odometry happens in
         // fast turns, where a wrong heading misplaces walls the most.
         may_update_map &= outcome.localized || prediction.from_odometry || self.map.is_empty();
-        if may_update_map && self.keyframes.is_keyframe(&outcome.pose) {
+        let learns = self.mode != Some(MapMode::Localize);
+        if may_update_map && learns && self.keyframes.is_keyframe(&outcome.pose) {
             let t = Instant::now();
             trace_span!("map_update")
                 .in_scope(|| self.map.update(&self.lines, &outcome.pose, &cov));
@@ -760,12 +905,22 @@ impl OfflineMapper {
                     covariance: cov,
                     travelled: 0.0,
                 };
-                self.graph.add(
-                    keyframe,
-                    outcome.pose,
-                    outcome.localized || first,
-                    &self.config.loop_closure,
-                );
+                let session_start = std::mem::take(&mut self.first_session_keyframe);
+                if session_start {
+                    self.graph.add_relocalized(
+                        keyframe,
+                        outcome.pose,
+                        cov,
+                        &self.config.loop_closure,
+                    );
+                } else {
+                    self.graph.add(
+                        keyframe,
+                        outcome.pose,
+                        outcome.localized || first,
+                        &self.config.loop_closure,
+                    );
+                }
                 self.anchor_keyframe = None;
                 let closed = self.graph.close_loop(
                     &self.config.map,
@@ -784,6 +939,10 @@ impl OfflineMapper {
                         // one this revisit was merged into, not on the last
                         // kept one, which may be far back along the path.
                         self.anchor_keyframe = self.graph.merge_revisit(&self.config.loop_closure);
+                        // The session's first keyframe merged into an old
+                        // one: the next kept keyframe starts the session.
+                        self.first_session_keyframe |=
+                            session_start && self.anchor_keyframe.is_some();
                     }
                     Err(e) => warn!(t = record.scan.t, "pose graph not optimised: {e}"),
                 }
@@ -878,6 +1037,18 @@ pub fn write_maps(
     write_file(&out_dir.join(PICTURE_FILE), pic.to_svg().as_bytes())
 }
 
+/// How [`run_offline_mapping`] runs.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct MapRunOptions<'a> {
+    /// Draw the accepted loop closures on the picture.
+    pub draw_loops: bool,
+    /// Stop at the first input item that cannot be used.
+    pub strict: bool,
+    /// Go on from a saved map, localizing in it or extending it, instead
+    /// of starting a new one.
+    pub start_from: Option<(&'a Path, MapMode)>,
+}
+
 /// How many skipped input items are named one by one (the rest counted).
 pub const SKIPPED_EXAMPLES: usize = 5;
 
@@ -893,12 +1064,22 @@ pub fn run_offline_mapping(
     input: &Path,
     out_dir: &Path,
     config: &MapperConfig,
-    draw_loops: bool,
-    strict: bool,
+    options: &MapRunOptions<'_>,
     progress: &mut dyn FnMut(Progress),
 ) -> Result<MappingSummary, PipelineError> {
+    let MapRunOptions {
+        draw_loops,
+        strict,
+        start_from,
+    } = *options;
+    let mut mapper = match start_from {
+        Some((map, mode)) => {
+            let loaded = crate::map::file::load(map)?;
+            OfflineMapper::from_map(*config, loaded.contents, mode)?
+        }
+        None => OfflineMapper::new(*config),
+    };
     let mut log = open_log(input)?;
-    let mut mapper = OfflineMapper::new(*config);
     mapper.defer_cls_rebuild();
     let mut input_broken = None;
     let (mut skipped, mut examples) = (0, Vec::new());
@@ -928,6 +1109,12 @@ pub fn run_offline_mapping(
         });
     }
     if mapper.trajectory().is_empty() {
+        if mapper.summary.scans_before_start > 0 {
+            return Err(PipelineError::StartMap(format!(
+                "the robot was not found in the map in any of the {} scans",
+                mapper.summary.scans_before_start
+            )));
+        }
         return Err(PipelineError::NoScans);
     }
     mapper.finish();

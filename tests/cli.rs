@@ -1304,3 +1304,51 @@ fn a_malformed_carmen_line_is_skipped_and_named() {
     assert_eq!(strict.status.code(), Some(1), "{strict}");
     assert!(!tmp.join("strict").exists());
 }
+
+/// `map --map M --mode localize`: a log replayed against a saved map is
+/// found in it, its trajectory in the map's frame (here the first run's,
+/// as the same log starts at the same place), the saved file untouched;
+/// `--mode extend` on a version-1 map (no keyframes) is refused with the
+/// reason.
+#[test]
+fn a_log_is_localized_against_a_saved_map() {
+    let dir = TempDir::new("resume");
+    let first = dir.join("first");
+    map(&fixture(CSAIL_FIXTURE), &first, &[]).succeeded();
+    let saved = std::fs::read(first.join("map.json")).unwrap();
+    let again = dir.join("again");
+    let run = map(
+        &fixture(CSAIL_FIXTURE),
+        &again,
+        &["--map", arg(&first.join("map.json")), "--mode", "localize"],
+    )
+    .succeeded();
+    assert_eq!(std::fs::read(first.join("map.json")).unwrap(), saved);
+    let a = read_tum(&first.join("trajectory.tum"));
+    let b = read_tum(&again.join("trajectory.tum"));
+    assert!(b.len() + 5 >= a.len(), "{run}");
+    let mut errors: Vec<f64> = b
+        .iter()
+        .filter_map(|p| {
+            let q = a.iter().find(|q| (q[0] - p[0]).abs() < 1e-6)?;
+            Some((p[1] - q[1]).hypot(p[2] - q[2]))
+        })
+        .collect();
+    errors.sort_by(f64::total_cmp);
+    assert!(errors[errors.len() / 2] < 0.05, "{errors:?}");
+
+    let v1 = dir.join("v1.json");
+    let map_v1 = clsmap::map::cls::ClsMap::load(
+        &first.join("map.json"),
+        clsmap::map::cls::ClsMapConfig::default(),
+    )
+    .unwrap();
+    clsmap::map::cls::store::save_items(&v1, &map_v1.items()).unwrap();
+    map(
+        &fixture(CSAIL_FIXTURE),
+        &dir.join("extend"),
+        &["--map", arg(&v1), "--mode", "extend"],
+    )
+    .failed()
+    .says("can be localized in, not extended");
+}

@@ -11,7 +11,7 @@ use clsmap::eval::{Relation, RelationErrors, evaluate, read_relations};
 use clsmap::geometry::Pose2;
 use clsmap::input::{ScanRecord, open_log};
 use clsmap::mapping_config::MapperConfig;
-use clsmap::pipeline::{OfflineMapper, Progress, run_offline_mapping};
+use clsmap::pipeline::{MapRunOptions, OfflineMapper, Progress, run_offline_mapping};
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
 use clsmap::trajectory::read_tum;
 use std::path::PathBuf;
@@ -276,8 +276,10 @@ fn run_offline_mapping_writes_trajectory_and_segments() {
         &excerpt,
         &out,
         &MapperConfig::default(),
-        true,
-        false,
+        &MapRunOptions {
+            draw_loops: true,
+            ..Default::default()
+        },
         &mut |p: Progress| last = Some(p),
     )
     .unwrap();
@@ -332,8 +334,10 @@ fn malformed_input_is_reported_with_its_line() {
         &input,
         &out.join("result"),
         &MapperConfig::default(),
-        false,
-        true,
+        &MapRunOptions {
+            strict: true,
+            ..Default::default()
+        },
         &mut |_| {},
     )
     .unwrap_err();
@@ -345,8 +349,7 @@ fn malformed_input_is_reported_with_its_line() {
         &input,
         &out.join("result"),
         &MapperConfig::default(),
-        false,
-        false,
+        &MapRunOptions::default(),
         &mut |_| {},
     )
     .unwrap();
@@ -358,4 +361,143 @@ fn malformed_input_is_reported_with_its_line() {
     );
     assert!(out.join("result/map.json").is_file());
     std::fs::remove_dir_all(&out).unwrap();
+}
+
+/// Resume from a saved map: the first 1,000 scans mapped with the
+/// defaults, then scans 500–900 replayed against the saved map — the robot found by
+/// global localization in a map whose frame its odometry knows nothing of
+/// — in `localize` mode (the map unchanged, the trajectory in the map's
+/// frame, agreeing with the first run's; after being carried elsewhere
+/// unseen by odometry, found again) and in `extend` mode (keyframes join
+/// the loaded graph and close loops against the old ones).
+#[test]
+fn a_saved_map_is_localized_in_and_extended() {
+    let Some(dir) = csail_dir() else { return };
+    let (records, _) = csail_head(&dir, 1000);
+    let mut first = OfflineMapper::new(MapperConfig::default());
+    first.defer_cls_rebuild();
+    for r in &records {
+        first.process(r);
+    }
+    first.finish();
+    let saved = first.contents();
+    let by_time: std::collections::HashMap<u64, Pose2> = first
+        .trajectory()
+        .iter()
+        .map(|(t, p)| (t.to_bits(), *p))
+        .collect();
+    // The second half, in an odometry frame moved and turned away.
+    let shift = Pose2::new(100.0, -40.0, 2.0);
+    let rest: Vec<ScanRecord> = records[500..900]
+        .iter()
+        .map(|r| ScanRecord {
+            scan: r.scan.clone(),
+            odometry: r.odometry.map(|o| shift.compose(&o)),
+        })
+        .collect();
+
+    let mut again = OfflineMapper::from_map(
+        MapperConfig::default(),
+        saved.clone(),
+        clsmap::pipeline::MapMode::Localize,
+    )
+    .unwrap();
+    for r in &rest {
+        again.process(r);
+    }
+    let s = again.summary();
+    assert!(s.scans_before_start < 20, "{s:?}");
+    assert_eq!(
+        again.map().len(),
+        saved.walls.len(),
+        "the map is not changed"
+    );
+    assert_eq!(again.keyframe_graph().len(), saved.keyframes.len());
+    let mut errors: Vec<f64> = again
+        .trajectory()
+        .iter()
+        .map(|(t, p)| {
+            let q = by_time[&t.to_bits()];
+            (p.x - q.x).hypot(p.y - q.y)
+        })
+        .collect();
+    errors.sort_by(f64::total_cmp);
+    let median = errors[errors.len() / 2];
+    let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+    eprintln!(
+        "localize: {} scans before found, {} poses, median {median:.3} m, mean {mean:.3} m from the first run",
+        s.scans_before_start,
+        errors.len()
+    );
+    assert!(median < 0.05 && mean < 0.15, "median {median}, mean {mean}");
+
+    // Kidnapped: after scan 650 the robot is carried to where it was at
+    // scan 750, its odometry none the wiser (it goes on from where it was).
+    let before = &records[500..650];
+    let after = &records[750..900];
+    let last = before.last().unwrap().odometry.unwrap();
+    let jump = last.compose(&after[0].odometry.unwrap().inverse());
+    let kidnapped: Vec<ScanRecord> = before
+        .iter()
+        .cloned()
+        .chain(after.iter().map(|r| ScanRecord {
+            scan: r.scan.clone(),
+            odometry: r.odometry.map(|o| jump.compose(&o)),
+        }))
+        .collect();
+    let mut carried = OfflineMapper::from_map(
+        MapperConfig::default(),
+        saved.clone(),
+        clsmap::pipeline::MapMode::Localize,
+    )
+    .unwrap();
+    for r in &kidnapped {
+        carried.process(r);
+    }
+    assert!(
+        carried.summary().relocalizations >= 1,
+        "{:?}",
+        carried.summary()
+    );
+    let found_again: Vec<f64> = carried
+        .trajectory()
+        .iter()
+        .filter(|(t, _)| *t >= after[40].scan.t)
+        .map(|(t, p)| {
+            let q = by_time[&t.to_bits()];
+            (p.x - q.x).hypot(p.y - q.y)
+        })
+        .collect();
+    let worst = found_again.iter().copied().fold(0.0, f64::max);
+    eprintln!(
+        "kidnapped: {} relocalizations, worst error 40 scans on: {worst:.3} m",
+        carried.summary().relocalizations
+    );
+    assert!(worst < 0.3, "{worst}");
+
+    let mut extended = OfflineMapper::from_map(
+        MapperConfig::default(),
+        saved.clone(),
+        clsmap::pipeline::MapMode::Extend,
+    )
+    .unwrap();
+    for r in &rest {
+        extended.process(r);
+    }
+    extended.finish();
+    let graph = extended.keyframe_graph();
+    assert!(graph.len() > saved.keyframes.len(), "no keyframe added");
+    assert!(graph.stats().accepted > 0, "{:?}", graph.stats());
+    // New keyframes are not chained to the old session's last one: the
+    // first new keyframe's only edge into the old graph is a loop edge.
+    let first_new = saved.keyframes.len();
+    let into_old: Vec<_> = graph
+        .graph()
+        .edges()
+        .iter()
+        .filter(|e| e.to == first_new && e.from < first_new)
+        .collect();
+    assert_eq!(into_old.len(), 1);
+    assert_eq!(into_old[0].kind, clsmap::graph::EdgeKind::Loop);
+    extended.cls_map().check_invariants().unwrap();
 }

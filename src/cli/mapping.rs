@@ -22,6 +22,7 @@ pub fn map(
     relations: Option<&Path>,
     draw_loops: bool,
     strict: bool,
+    start_from: Option<(&Path, pipeline::MapMode)>,
 ) -> anyhow::Result<ExitCode> {
     let config = mapper_config(config)?;
     let bar = ProgressBar::new(0).with_style(
@@ -40,8 +41,17 @@ pub fn map(
             bar.set_message(format!("{} scans", p.scans));
         }
     };
-    let result =
-        pipeline::run_offline_mapping(input, out, &config, draw_loops, strict, &mut on_progress);
+    let result = pipeline::run_offline_mapping(
+        input,
+        out,
+        &config,
+        &pipeline::MapRunOptions {
+            draw_loops,
+            strict,
+            start_from,
+        },
+        &mut on_progress,
+    );
     bar.finish_and_clear();
     let summary = result.with_context(|| format!("cannot map {}", input.display()))?;
     let t = &summary.mean_time;
@@ -94,6 +104,12 @@ pub fn map(
             "  input skipped:              {} items (first: {})",
             summary.skipped_input,
             summary.skipped_examples.join("; ")
+        );
+    }
+    if summary.scans_before_start > 0 {
+        println!(
+            "  before found in the map:    {} scans (no pose)",
+            summary.scans_before_start
         );
     }
     if summary.scans_with_bad_odometry > 0 {

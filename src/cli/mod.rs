@@ -146,6 +146,15 @@ enum Command {
         /// nothing, instead of skipping it.
         #[arg(long)]
         strict: bool,
+        /// Go on from this saved map (map.json) instead of a new one: the
+        /// robot is found in it by global localization, and the trajectory
+        /// is in its frame. The file itself is never written.
+        #[arg(long)]
+        map: Option<PathBuf>,
+        /// With --map: `localize` (the map stays as it is) or `extend`
+        /// (new keyframes join it, loops close against it).
+        #[arg(long, default_value = "localize", requires = "map")]
+        mode: String,
     },
     /// Draw a CLS map (map.json) as SVG, or export it as a ROS map_server
     /// occupancy grid (PGM + YAML) when the output ends in `.pgm`.
@@ -294,14 +303,22 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             relations,
             draw_loops,
             strict,
-        } => mapping::map(
-            &input,
-            &out,
-            config.as_deref(),
-            relations.as_deref(),
-            draw_loops,
-            strict,
-        ),
+            map,
+            mode,
+        } => {
+            let mode: clsmap::pipeline::MapMode = mode
+                .parse()
+                .map_err(|e: String| anyhow::anyhow!("--mode: {e}"))?;
+            mapping::map(
+                &input,
+                &out,
+                config.as_deref(),
+                relations.as_deref(),
+                draw_loops,
+                strict,
+                map.as_deref().map(|m| (m, mode)),
+            )
+        }
         Command::Eval {
             trajectory,
             relations,

@@ -83,6 +83,8 @@ pub struct KeyframeGraph {
     /// The job in flight: its id and how many keyframes it covers.
     in_flight: Option<(u64, usize)>,
     jobs: u64,
+    /// The next keyframe gets no chain edge (see [`Self::add_relocalized`]).
+    unchained_next: bool,
 }
 
 /// An optimisation of a snapshot of the graph, with the rebuild of the
@@ -340,7 +342,7 @@ impl KeyframeGraph {
         keyframe.travelled = self.odometer;
         let index = self.graph.add_pose(pose);
         self.newest_agrees = false;
-        if let Some(p) = previous {
+        if let Some(p) = previous.filter(|_| !std::mem::take(&mut self.unchained_next)) {
             let delta = p.between(&pose);
             let mut information = cfg.chain_information(&delta);
             if !localized {
@@ -360,6 +362,45 @@ impl KeyframeGraph {
             }
         }
         self.keyframes.push(Arc::new(keyframe));
+        index
+    }
+
+    /// Adds `keyframe` at `pose` (covariance `covariance`), the first of a
+    /// new session on a loaded map: no measurement joins it to the last
+    /// keyframe of the old session, so it is tied instead by a loop edge
+    /// to the nearest old keyframe, as a relocalization against the old
+    /// map is a loop closure. Returns its index.
+    pub fn add_relocalized(
+        &mut self,
+        keyframe: Keyframe,
+        pose: Pose2,
+        covariance: [[f64; 3]; 3],
+        cfg: &LoopClosureConfig,
+    ) -> usize {
+        let nearest = self
+            .graph
+            .poses()
+            .iter()
+            .enumerate()
+            .map(|(j, p)| (j, (p.x - pose.x).hypot(p.y - pose.y)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(j, _)| j);
+        self.unchained_next = true;
+        let index = self.add(keyframe, pose, true, cfg);
+        if let Some(j) = nearest {
+            let seen = super::LoopMatch {
+                keyframe: j,
+                pose,
+                covariance,
+                matches: 0,
+                matched_length: 0.0,
+                by_voting: false,
+            };
+            let edge = seen.edge(index, &self.graph.poses()[j], cfg);
+            if let Err(e) = self.graph.add_edge(edge) {
+                debug!("relocalization edge refused: {e}");
+            }
+        }
         index
     }
 

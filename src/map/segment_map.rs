@@ -283,6 +283,15 @@ impl SegmentMap {
         })
     }
 
+    /// Adds `walls` (map frame) as they are, each a wall of its own seen
+    /// once: the walls of a map that kept only its CLS map.
+    pub fn insert_walls(&mut self, walls: &[CogLine]) {
+        for line in walls {
+            let id = self.index.insert(self.floor_sigmas(*line));
+            self.set_observations(id, 1);
+        }
+    }
+
     /// The map of `walls` (as [`segments`](Self::segments) gave them,
     /// from a map file), keeping their ids; `None` if two share an id.
     pub fn from_walls(config: SegmentMapConfig, walls: &[MapSegment]) -> Option<Self> {

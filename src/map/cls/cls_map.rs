@@ -234,13 +234,19 @@ impl ClsMap {
         crate::map::file::save(path, &contents)
     }
 
+    /// The same map under another configuration (for what it grows next).
+    pub fn with_config(mut self, config: ClsMapConfig) -> Self {
+        self.config = config;
+        self
+    }
+
     /// Reads the CLS map of a `map.json` of either version; a corrupt,
     /// truncated or invalid file is refused with the reason.
     pub fn load(path: &Path, config: ClsMapConfig) -> Result<Self, StoreError> {
-        let loaded = crate::map::file::load(path)?;
-        let mut map = loaded.contents.cls;
-        map.config = config;
-        Ok(map)
+        Ok(crate::map::file::load(path)?
+            .contents
+            .cls
+            .with_config(config))
     }
 
     /// Adds one scan: `lines` extracted from `scan` (robot frame, scan
