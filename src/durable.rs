@@ -53,6 +53,29 @@ pub fn check_writable(dir: &Path) -> io::Result<()> {
     f.sync_all()
 }
 
+/// Largest configuration file read (bytes): 1 MiB, far above any real one.
+pub const MAX_CONFIG_BYTES: u64 = 1 << 20;
+/// Largest map file read (bytes): 1 GiB (the CSAIL floor's is 4.2 MB).
+pub const MAX_MAP_BYTES: u64 = 1 << 30;
+
+/// The text of `path`, refused (`InvalidData`) beyond `max` bytes, so a
+/// wrong path (`/dev/zero`, a huge log given as a config) fails at once
+/// instead of filling memory.
+pub fn read_bounded(path: &Path, max: u64) -> io::Result<String> {
+    use std::io::Read as _;
+    let mut text = String::new();
+    File::open(path)?
+        .take(max.saturating_add(1))
+        .read_to_string(&mut text)?;
+    if text.len() as u64 > max {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidData,
+            format!("larger than {max} bytes; not read"),
+        ));
+    }
+    Ok(text)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -105,6 +128,20 @@ mod tests {
         );
         // Nothing left behind but the map and the planted links.
         assert_eq!(fs::read_dir(&out).unwrap().count(), 4);
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn reads_are_bounded() {
+        let e = read_bounded(Path::new("/dev/zero"), 1000).unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::InvalidData, "{e}");
+        let dir = std::env::temp_dir().join(format!("clsmap-bounded-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("small");
+        fs::write(&path, "x = 1\n").unwrap();
+        assert_eq!(read_bounded(&path, 6).unwrap(), "x = 1\n");
+        assert!(read_bounded(&path, 5).is_err());
         fs::remove_dir_all(&dir).unwrap();
     }
 

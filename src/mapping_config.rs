@@ -107,12 +107,30 @@ impl OdometryNoise {
     }
 }
 
+/// `laser_mount` with any of its fields left out (0), unknown ones refused.
+fn mount_fields<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Pose2, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct Fields {
+        #[serde(default)]
+        x: f64,
+        #[serde(default)]
+        y: f64,
+        #[serde(default)]
+        theta: f64,
+    }
+    let f = Fields::deserialize(d)?;
+    Ok(Pose2::new(f.x, f.y, f.theta))
+}
+
 /// Everything the offline mapper needs.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MapperConfig {
     /// Laser pose in the robot frame (m, rad). Default: the identity, as in
-    /// the CSAIL log whose laser pose equals its odometry pose.
+    /// the CSAIL log whose laser pose equals its odometry pose. Each of
+    /// `x`, `y`, `theta` may be left out (0).
+    #[serde(deserialize_with = "mount_fields")]
     pub laser_mount: Pose2,
     pub extraction: ExtractionConfig,
     pub localizer: LocalizerConfig,
@@ -496,6 +514,17 @@ mod tests {
             MapperConfig::from_toml("").unwrap(),
             MapperConfig::default()
         );
+    }
+
+    /// `config/mapper.toml` says every key is optional: so is each field
+    /// of the laser mount, and a misspelt one is still refused.
+    #[test]
+    fn a_partial_laser_mount_takes_zero_for_the_rest() {
+        let cfg = MapperConfig::from_toml("[laser_mount]\nx = 0.12\n").unwrap();
+        assert_eq!(cfg.laser_mount, Pose2::new(0.12, 0.0, 0.0));
+        let cfg = MapperConfig::from_toml("laser_mount = { theta = 0.5 }\n").unwrap();
+        assert_eq!(cfg.laser_mount, Pose2::new(0.0, 0.0, 0.5));
+        assert!(MapperConfig::from_toml("[laser_mount]\nz = 1.0\n").is_err());
     }
 
     #[test]

@@ -1352,3 +1352,24 @@ fn a_log_is_localized_against_a_saved_map() {
     .failed()
     .says("can be localized in, not extended");
 }
+
+/// Hardening: a configuration or map path that is endless (`/dev/zero`)
+/// fails at once with the reason instead of filling memory.
+#[cfg(unix)]
+#[test]
+fn endless_files_are_refused_not_read() {
+    let dir = TempDir::new("endless");
+    map(
+        &fixture(CSAIL_FIXTURE),
+        &dir.join("out"),
+        &["--config", "/dev/zero"],
+    )
+    .failed()
+    .says("larger than");
+    clsmap(&["render", "/dev/zero", "-o", arg(&dir.join("x.svg"))])
+        .failed()
+        .says("larger than");
+    clsmap(&["run", "--config", "/dev/zero"])
+        .failed()
+        .says("larger than");
+}

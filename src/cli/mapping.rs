@@ -221,7 +221,7 @@ pub fn mapper_config(path: Option<&Path>) -> anyhow::Result<MapperConfig> {
     let Some(path) = path else {
         return Ok(MapperConfig::default());
     };
-    let text = std::fs::read_to_string(path)
+    let text = clsmap::durable::read_bounded(path, clsmap::durable::MAX_CONFIG_BYTES)
         .with_context(|| format!("cannot read the configuration {}", path.display()))?;
     MapperConfig::from_toml(&text)
         .with_context(|| format!("invalid configuration {}", path.display()))

@@ -275,10 +275,12 @@ pub enum DaemonConfigError {
 impl DaemonConfig {
     /// Reads and checks a configuration file.
     pub fn load(path: &Path) -> Result<DaemonConfig, DaemonConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| DaemonConfigError::Read {
-            path: path.to_owned(),
-            source,
-        })?;
+        let text = crate::durable::read_bounded(path, crate::durable::MAX_CONFIG_BYTES).map_err(
+            |source| DaemonConfigError::Read {
+                path: path.to_owned(),
+                source,
+            },
+        )?;
         DaemonConfig::from_toml(&text)
     }
 

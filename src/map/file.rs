@@ -307,7 +307,8 @@ pub fn save(path: &Path, contents: &MapContents) -> Result<(), StoreError> {
 /// Reads a map file of either version; a corrupt, truncated, foreign or
 /// inconsistent file is refused with the reason.
 pub fn load(path: &Path) -> Result<LoadedMap, StoreError> {
-    let text = std::fs::read_to_string(path).map_err(io_error_at(path))?;
+    let text = crate::durable::read_bounded(path, crate::durable::MAX_MAP_BYTES)
+        .map_err(io_error_at(path))?;
     decode(&text)
 }
 
