@@ -250,7 +250,7 @@ impl MapperConfig {
     /// NaN, no infinity (but for `max_correction_sigmas`), no negative
     /// lengths, no zero where the value divides or bounds a search.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        use Rule::{AtLeast, Finite, NonNegative, Positive, Wedge};
+        use Rule::{AtLeast, Finite, NonNegative, Positive, Wedge, Within};
         let (e, l, m, o, c) = (
             &self.extraction,
             &self.localizer,
@@ -295,7 +295,18 @@ impl MapperConfig {
         let x = "localizer";
         v.check(x, "gate_sigmas", l.gate_sigmas, NonNegative)?;
         v.check(x, "min_matches", l.min_matches as f64, AtLeast(1.0))?;
-        v.check(x, "max_iterations", l.max_iterations as f64, AtLeast(1.0))?;
+        v.check(
+            x,
+            "max_iterations",
+            l.max_iterations as f64,
+            Within(1.0, 1000.0),
+        )?;
+        v.check(
+            x,
+            "heading_search",
+            l.heading_search as f64,
+            Within(0.0, 20.0),
+        )?;
         v.check(
             x,
             "converged_translation",
@@ -345,7 +356,9 @@ impl MapperConfig {
         v.check(x, "max_heading_scale", o.max_heading_scale, AtLeast(1.0))?;
         v.check("cls", "point_tolerance", c.point_tolerance, NonNegative)?;
         v.check("cls", "max_wedge", c.max_wedge, Wedge)?;
-        v.check("cls.region", "grid", c.region.grid, Positive)?;
+        // A grid finer than 10 µm loses the polygon union to rounding; one
+        // coarser than 10 cm is no map.
+        v.check("cls.region", "grid", c.region.grid, Within(1e-5, 0.1))?;
         v.check("cls.region", "min_edge", c.region.min_edge, NonNegative)?;
         v.check(
             "cls.region",
@@ -394,11 +407,27 @@ impl MapperConfig {
             v.check(x, key, value, Positive)?;
         }
         v.check(x, "ambiguity_ratio", lc.ambiguity_ratio, Positive)?;
-        v.check(x, "max_candidates", lc.max_candidates as f64, AtLeast(1.0))?;
-        v.check(x, "min_matches", lc.min_matches as f64, AtLeast(2.0))?;
-        v.check(x, "vote_every", lc.vote_every as f64, AtLeast(1.0))?;
+        v.check(
+            x,
+            "max_candidates",
+            lc.max_candidates as f64,
+            Within(1.0, 100.0),
+        )?;
+        v.check(x, "min_matches", lc.min_matches as f64, Within(2.0, 100.0))?;
+        v.check(x, "vote_every", lc.vote_every as f64, Within(1.0, 1000.0))?;
+        v.check(
+            x,
+            "reference_keyframes",
+            lc.reference_keyframes as f64,
+            Within(0.0, 100.0),
+        )?;
         let (x, oc) = ("loop_closure.optimizer", &lc.optimizer);
-        v.check(x, "max_iterations", oc.max_iterations as f64, AtLeast(1.0))?;
+        v.check(
+            x,
+            "max_iterations",
+            oc.max_iterations as f64,
+            Within(1.0, 10_000.0),
+        )?;
         v.check(x, "converged_step", oc.converged_step, Positive)?;
         v.check(x, "loop_kernel", oc.loop_kernel, NonNegative)?;
         Ok(())
@@ -418,6 +447,8 @@ enum Rule {
     Gate,
     /// An envelope wedge: in (0, π].
     Wedge,
+    /// Within `[lo, hi]`: beyond, a value is a typo or stalls the mapper.
+    Within(f64, f64),
 }
 
 impl Rule {
@@ -431,6 +462,7 @@ impl Rule {
                 Rule::AtLeast(min) => v >= min,
                 Rule::Gate => v > 0.0 && v < FRAC_PI_2,
                 Rule::Wedge => v > 0.0 && v <= PI,
+                Rule::Within(lo, hi) => (lo..=hi).contains(&v),
             }
     }
 
@@ -442,6 +474,7 @@ impl Rule {
             Rule::AtLeast(min) => format!(">= {min}"),
             Rule::Gate => "in (0, π/2)".into(),
             Rule::Wedge => "in (0, π]".into(),
+            Rule::Within(lo, hi) => format!("in [{lo}, {hi}]"),
         }
     }
 }
@@ -603,6 +636,12 @@ mod documented_defaults {
                 "[map.fusion] max_angle_diff",
             ),
             ("[cls.region]\ngrid = -0.001\n", "[cls.region] grid"),
+            ("[cls.region]\ngrid = 1e-300\n", "[cls.region] grid"),
+            ("[cls.region]\ngrid = 1e300\n", "[cls.region] grid"),
+            (
+                "[localizer]\nmax_iterations = 4000000000\n",
+                "[localizer] max_iterations",
+            ),
         ] {
             let err = MapperConfig::from_toml(text).unwrap_err().to_string();
             assert!(err.starts_with(key), "{text:?}: {err}");

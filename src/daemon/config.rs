@@ -349,6 +349,22 @@ impl DaemonConfig {
             1e-3,
             50.0,
         )?;
+        if b.baud == 0 {
+            return Err(range("base.baud", "0".into(), "> 0"));
+        }
+        let host_port = b.address.rsplit_once(':').is_some_and(|(host, port)| {
+            !host.is_empty() && port.parse::<u16>().is_ok_and(|p| p > 0)
+        });
+        if b.adapter == BaseKind::Tcp && !host_port {
+            return Err(DaemonConfigError::Invalid {
+                key: "base.address".into(),
+                line: locate("base.address"),
+                reason: format!(
+                    "{:?} is not a host and port such as \"192.168.1.20:7300\"",
+                    b.address
+                ),
+            });
+        }
         if b.adapter == BaseKind::Replay && b.replay.is_none() {
             return Err(DaemonConfigError::Invalid {
                 key: "base.replay".into(),
@@ -564,6 +580,26 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("line 2"), "{e}");
+    }
+
+    /// A base link that cannot work is refused at load, with its line,
+    /// not later in a retry loop.
+    #[test]
+    fn a_base_link_that_cannot_work_is_refused_with_its_line() {
+        let e = DaemonConfig::from_toml("[base]\nadapter = \"tcp\"\naddress = \"robot\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("base.address (line 3)"), "{e}");
+        let e = DaemonConfig::from_toml("[base]\nadapter = \"tcp\"\naddress = \"robot:99999\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("base.address"), "{e}");
+        DaemonConfig::from_toml("[base]\nadapter = \"tcp\"\naddress = \"robot.local:7300\"\n")
+            .unwrap();
+        let e = DaemonConfig::from_toml("[base]\nbaud = 0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("base.baud (line 2)"), "{e}");
     }
 
     #[test]
