@@ -37,7 +37,17 @@ pub fn write_atomically_with(
     prefix.push(name);
     prefix.push(".tmp-");
     // Dropping the temporary file on an error path removes it.
-    let mut tmp = tempfile::Builder::new().prefix(&prefix).tempfile_in(&dir)?;
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(&prefix);
+    // Readable by others as a plainly created file would be (0666 less the
+    // umask), not tempfile's private 0600: a map server or viewer under
+    // another account reads these files.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt as _;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    let mut tmp = builder.tempfile_in(&dir)?;
     write(tmp.as_file_mut())?;
     tmp.as_file().sync_all()?;
     tmp.persist(path).map_err(|e| e.error)?;

@@ -418,8 +418,9 @@ impl OfflineMapper {
     pub fn defer_cls_rebuild(&mut self) {
         self.defer_cls_rebuild = true;
         // Built once from the keyframes at the end, since it is the same
-        // map the incremental updates would give for the same poses.
-        self.cls_stale = true;
+        // map the incremental updates would give for the same poses; a CLS
+        // map loaded without keyframes (version 1) is kept as it is.
+        self.cls_stale = !self.graph.is_empty() || self.cls.is_empty();
     }
 
     /// The end of a run: optimises the pose graph once more if loops came
@@ -650,6 +651,12 @@ impl OfflineMapper {
         )
     }
 
+    /// A job taken with [`take_optimisation`](Self::take_optimisation) was
+    /// lost (its thread failed): the next one takes its loops in.
+    pub fn abandon_optimisation(&mut self) {
+        self.graph.abandon_job();
+    }
+
     /// Takes in an optimisation's result: keyframes, trajectory and
     /// predictor move to the corrected poses, the walls and the CLS map
     /// become the job's rebuild plus the keyframes taken since it started.
@@ -731,7 +738,7 @@ impl OfflineMapper {
                         keyframe: false,
                         lines: self.lines.len(),
                         matches: 0,
-                        rejection: Some("NotFoundInTheMapYet".to_owned()),
+                        rejection: Some(NOT_FOUND_YET.to_owned()),
                         by_previous_scan: false,
                     };
                 }
@@ -837,6 +844,7 @@ impl OfflineMapper {
         // map for a while (pushed aside, or drifted through a stretch the
         // map shows little of) is looked for again by global localization
         // while it goes on; once one place remains, that is its pose.
+        let mut relocated = false;
         if self.mode.is_some() {
             if outcome.localized && !outcome.by_previous_scan {
                 self.lost_scans = 0;
@@ -853,7 +861,7 @@ impl OfflineMapper {
                 self.relocalizer = Some(StartSearch::new(walls, GlobalConfig::default()));
             }
             // A search costs milliseconds on a large map: every few scans.
-            let due = self.lost_scans % RELOCALIZE_EVERY_SCANS == 0;
+            let due = self.lost_scans.is_multiple_of(RELOCALIZE_EVERY_SCANS);
             if let Some(search) = self.relocalizer.as_mut().filter(|_| due)
                 && let Some((pose, found_cov)) = search.step(&self.lines, odometry)
             {
@@ -864,6 +872,10 @@ impl OfflineMapper {
                 outcome.pose = pose;
                 outcome.localized = true;
                 cov = found_cov;
+                relocated = true;
+                // The next keyframe is tied to the old map by a loop edge,
+                // not chained to the last one across the jump.
+                self.first_session_keyframe |= self.mode == Some(MapMode::Extend);
             }
         }
 
@@ -952,6 +964,10 @@ impl OfflineMapper {
         }
 
         self.predictor.record(outcome.pose, cov, outcome.localized);
+        if relocated {
+            // The step to here is the jump, not motion to extrapolate.
+            self.predictor.jumped();
+        }
         // The fallback reference follows the map's rule: a scan at a
         // doubtful pose (a refused fix) does not become the reference the
         // next scan is matched against, or the next scan would agree with
@@ -1048,6 +1064,10 @@ pub struct MapRunOptions<'a> {
     /// of starting a new one.
     pub start_from: Option<(&'a Path, MapMode)>,
 }
+
+/// [`ScanOutcome::rejection`] of a scan before the robot was found in a
+/// loaded map.
+pub const NOT_FOUND_YET: &str = "NotFoundInTheMapYet";
 
 /// How many skipped input items are named one by one (the rest counted).
 pub const SKIPPED_EXAMPLES: usize = 5;

@@ -416,10 +416,10 @@ fn count_scan_telegrams(bytes: &[u8]) -> usize {
     let mut decoder = Decoder::new();
     let mut scans = 0;
     decoder.feed(bytes, |event| {
-        if let DecodeEvent::Reply(frame) = event {
-            if matches!(frame.reply, Reply::ScanData(_)) {
-                scans += 1;
-            }
+        if let DecodeEvent::Reply(frame) = event
+            && matches!(frame.reply, Reply::ScanData(_))
+        {
+            scans += 1;
         }
     });
     scans
@@ -1351,6 +1351,24 @@ fn a_log_is_localized_against_a_saved_map() {
     )
     .failed()
     .says("can be localized in, not extended");
+    // Localized in, a version-1 map is written back whole, not emptied.
+    let from_v1 = dir.join("from-v1");
+    map(&fixture(CSAIL_FIXTURE), &from_v1, &["--map", arg(&v1)]).succeeded();
+    let written = clsmap::map::cls::ClsMap::load(
+        &from_v1.join("map.json"),
+        clsmap::map::cls::ClsMapConfig::default(),
+    )
+    .unwrap();
+    assert_eq!(written.items().len(), map_v1.items().len());
+    // The run never writes over the map it starts from.
+    map(
+        &fixture(CSAIL_FIXTURE),
+        &first,
+        &["--map", arg(&first.join("map.json"))],
+    )
+    .failed()
+    .says("would overwrite the map it starts from");
+    assert_eq!(std::fs::read(first.join("map.json")).unwrap(), saved);
 }
 
 /// Hardening: a configuration or map path that is endless (`/dev/zero`)

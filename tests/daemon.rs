@@ -210,3 +210,54 @@ fn stalled_odometry_stops_the_base_until_it_returns() {
     robot.live().mapper().cls_map().check_invariants().unwrap();
     assert!(robot.stats().mean_error < 0.12, "{:?}", robot.stats());
 }
+
+/// `[map] load`: the lab explored and saved, then a second run from
+/// another start pose in the same lab, exploring, in `localize` mode: the
+/// robot is found in the saved map within a few scans and its poses are
+/// in the saved map's frame; the saved file is not written. A map path
+/// that does not load stops the start (`on_bad_map = "refuse"`), or with
+/// `"new"` starts a new map.
+#[test]
+fn a_run_goes_on_from_a_saved_map() {
+    let dir = std::env::temp_dir().join(format!("clsmap-resume-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut config = demo_config().unwrap();
+    config.sim.world = "lab".into();
+    let mut first = VirtualRobot::new(&config).unwrap();
+    first.run_until(config.daemon.max_run_time, |r| {
+        r.live().exploration_complete()
+    });
+    let origin = first.map_origin().unwrap();
+    first.checkpoint(&dir).unwrap();
+    let saved = dir.join("map.json");
+    let bytes = std::fs::read(&saved).unwrap();
+
+    let mut second_config = config.clone();
+    second_config.map.load = Some(saved.clone());
+    second_config.map.mode = "localize".into();
+    let start = origin.compose(&clsmap::geometry::Pose2::new(1.5, 0.8, 1.2));
+    second_config.sim.start = Some(start);
+    let mut second = VirtualRobot::new(&second_config).unwrap();
+    second.set_map_origin(origin);
+    second.run_until(30.0, |_| false);
+    let summary = second.live().mapper().summary();
+    let stats = second.stats().clone();
+    println!(
+        "resumed: {} scans before found, {} scans scored, mean error {:.3} m, max {:.3} m in the saved map's frame",
+        summary.scans_before_start, stats.scans, stats.mean_error, stats.max_error
+    );
+    assert!(summary.scans_before_start < 40, "{summary:?}");
+    assert!(stats.scans > 500, "{stats:?}");
+    assert!(
+        stats.mean_error < 0.03 && stats.max_error < 0.15,
+        "{stats:?}"
+    );
+    assert_eq!(std::fs::read(&saved).unwrap(), bytes);
+
+    let mut bad = config.clone();
+    bad.map.load = Some(dir.join("missing.json"));
+    assert!(VirtualRobot::new(&bad).is_err());
+    bad.map.on_bad_map = "new".into();
+    assert!(VirtualRobot::new(&bad).is_ok());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -22,9 +22,21 @@ pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
 }
 
 /// Runs the daemon on `config` until SIGTERM or SIGINT.
-pub fn run_daemon(config_path: &Path) -> anyhow::Result<ExitCode> {
-    let config = DaemonConfig::load(config_path)
+pub fn run_daemon(
+    config_path: &Path,
+    map: Option<std::path::PathBuf>,
+    mode: Option<String>,
+) -> anyhow::Result<ExitCode> {
+    let mut config = DaemonConfig::load(config_path)
         .with_context(|| format!("invalid configuration {}", config_path.display()))?;
+    if let Some(map) = map {
+        config.map.load = Some(map);
+    }
+    if let Some(mode) = mode {
+        mode.parse::<clsmap::pipeline::MapMode>()
+            .map_err(|e| anyhow::anyhow!("--mode: {e}"))?;
+        config.map.mode = mode;
+    }
     let summary = runtime()?.block_on(async {
         let hooks = signal_hooks(Some(config_path))?;
         run(config, hooks).await.context("the daemon failed")

@@ -25,6 +25,18 @@ pub fn map(
     start_from: Option<(&Path, pipeline::MapMode)>,
 ) -> anyhow::Result<ExitCode> {
     let config = mapper_config(config)?;
+    if let Some((map, _)) = start_from {
+        let written = out.join(pipeline::MAP_FILE);
+        if let (Ok(a), Ok(b)) = (map.canonicalize(), written.canonicalize())
+            && a == b
+        {
+            anyhow::bail!(
+                "--out {} would overwrite the map it starts from ({}); choose another directory",
+                out.display(),
+                map.display()
+            );
+        }
+    }
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template(
             "{spinner} mapping [{bar:40}] {percent:>3}% {msg} ({elapsed} elapsed, {eta} left)",
@@ -37,7 +49,7 @@ pub fn map(
             bar.set_length(p.bytes_total);
         }
         bar.set_position(p.bytes_read);
-        if p.scans % 64 == 0 {
+        if p.scans.is_multiple_of(64) {
             bar.set_message(format!("{} scans", p.scans));
         }
     };

@@ -58,6 +58,12 @@ enum Command {
         /// Daemon configuration (TOML); every key and default is in config/clsmap.toml.
         #[arg(long)]
         config: PathBuf,
+        /// Start from this saved map (map.json), as `[map] load`.
+        #[arg(long)]
+        map: Option<PathBuf>,
+        /// With --map: `localize` or `extend`, as `[map] mode`.
+        #[arg(long, requires = "map")]
+        mode: Option<String>,
     },
     /// Find an LMS200 on a serial port: line speed, type, firmware, variant, units.
     Probe {
@@ -263,7 +269,7 @@ fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Demo { out, world, seed } => demo::demo(out.as_deref(), world.as_deref(), seed),
-        Command::Run { config } => daemon::run_daemon(&config),
+        Command::Run { config, map, mode } => daemon::run_daemon(&config, map, mode),
         Command::Probe { port } => sensor::probe(&port),
         Command::Record {
             port,

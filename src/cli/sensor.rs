@@ -309,10 +309,10 @@ pub fn decode(
 }
 
 fn collect_scan(ev: DecodeEvent, scans: &mut Vec<(Scan, u8)>) {
-    if let DecodeEvent::Reply(frame) = ev {
-        if let Reply::ScanData(scan) = frame.reply {
-            scans.push((scan, frame.status.0));
-        }
+    if let DecodeEvent::Reply(frame) = ev
+        && let Reply::ScanData(scan) = frame.reply
+    {
+        scans.push((scan, frame.status.0));
     }
 }
 

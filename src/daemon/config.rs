@@ -26,7 +26,47 @@ pub struct DaemonConfig {
     pub sim: SimConfig,
     pub exploration: ExplorationSection,
     pub daemon: LoopConfig,
+    pub map: MapSection,
     pub mapper: MapperConfig,
+}
+
+/// `[map]`: start from a saved map instead of a new one.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MapSection {
+    /// A `map.json` to start from (default: none, a new map). It is never
+    /// written: the run writes its own directory as always.
+    pub load: Option<PathBuf>,
+    /// `"localize"` (the map is not changed) or `"extend"` (new keyframes
+    /// join it, loops close against it). Default `"localize"`.
+    pub mode: String,
+    /// When `load` cannot be read or is not a valid map: `"refuse"` (exit
+    /// with the reason; a robot silently starting a fresh map in a mapped
+    /// building is the worse failure) or `"new"` (warn, start a new map).
+    /// Default `"refuse"`.
+    pub on_bad_map: String,
+}
+
+impl Default for MapSection {
+    fn default() -> Self {
+        MapSection {
+            load: None,
+            mode: "localize".into(),
+            on_bad_map: "refuse".into(),
+        }
+    }
+}
+
+impl MapSection {
+    /// The mode, once checked by [`DaemonConfig::validate`].
+    pub fn mode(&self) -> Option<crate::pipeline::MapMode> {
+        self.mode.parse().ok()
+    }
+
+    /// Whether a bad map falls back to a new one.
+    pub fn new_on_bad_map(&self) -> bool {
+        self.on_bad_map == "new"
+    }
 }
 
 /// Where the scans come from.
@@ -349,6 +389,20 @@ impl DaemonConfig {
             1e-3,
             50.0,
         )?;
+        if self.map.mode().is_none() {
+            return Err(range(
+                "map.mode",
+                format!("{:?}", self.map.mode),
+                "\"localize\" or \"extend\"",
+            ));
+        }
+        if !matches!(self.map.on_bad_map.as_str(), "refuse" | "new") {
+            return Err(range(
+                "map.on_bad_map",
+                format!("{:?}", self.map.on_bad_map),
+                "\"refuse\" or \"new\"",
+            ));
+        }
         if b.baud == 0 {
             return Err(range("base.baud", "0".into(), "> 0"));
         }
@@ -634,7 +688,7 @@ mod tests {
         }
         // Keys with no default value (optional paths, the sim start) are
         // documented as comments.
-        for key in ["record", "replay", "start", "state_dir"] {
+        for key in ["record", "replay", "start", "state_dir", "load"] {
             assert!(
                 text.lines().any(|l| l.starts_with(&format!("# {key} ="))),
                 "config/clsmap.toml does not show `{key}`"

@@ -85,7 +85,27 @@ impl LiveMapper {
         exploration: Option<(ExplorationConfig, DriveConfig)>,
         now: f64,
     ) -> LiveMapper {
-        let mut offline = OfflineMapper::new(mapper);
+        Self::with_mapper(OfflineMapper::new(mapper), exploration, now)
+    }
+
+    /// A live mapper that goes on from a saved map (see
+    /// [`OfflineMapper::from_map`]).
+    pub fn from_map(
+        mapper: MapperConfig,
+        contents: crate::map::MapContents,
+        mode: crate::pipeline::MapMode,
+        exploration: Option<(ExplorationConfig, DriveConfig)>,
+        now: f64,
+    ) -> Result<LiveMapper, crate::pipeline::PipelineError> {
+        let offline = OfflineMapper::from_map(mapper, contents, mode)?;
+        Ok(Self::with_mapper(offline, exploration, now))
+    }
+
+    fn with_mapper(
+        mut offline: OfflineMapper,
+        exploration: Option<(ExplorationConfig, DriveConfig)>,
+        now: f64,
+    ) -> LiveMapper {
         // Samples come from a base polled live, each with its own time: an
         // unchanged pose is the robot standing still.
         offline.trust_unchanged_odometry();
@@ -119,6 +139,11 @@ impl LiveMapper {
     /// See [`OfflineMapper::take_optimisation`].
     pub fn take_optimisation(&mut self) -> Option<crate::graph::OptimisationJob> {
         self.mapper.take_optimisation()
+    }
+
+    /// See [`OfflineMapper::abandon_optimisation`].
+    pub fn abandon_optimisation(&mut self) {
+        self.mapper.abandon_optimisation();
     }
 
     /// See [`OfflineMapper::apply_optimisation`].

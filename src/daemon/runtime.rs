@@ -65,6 +65,12 @@ pub enum DaemonError {
     Runtime(#[source] std::io::Error),
     #[error("the map could not be saved anywhere; tried {tried}")]
     Save { tried: String },
+    #[error("cannot start from the map {path} (on_bad_map = \"refuse\")")]
+    Map {
+        path: PathBuf,
+        #[source]
+        source: crate::pipeline::PipelineError,
+    },
 }
 
 /// Why the loop ended.
@@ -222,6 +228,46 @@ fn check_writable(dir: &Path) -> Result<(), DaemonError> {
     };
     std::fs::create_dir_all(dir).map_err(fail)?;
     crate::durable::check_writable(dir).map_err(fail)
+}
+
+/// The mapper the run starts with: a new map, or `[map] load` in its mode.
+/// A map that cannot be loaded stops the start with the reason, or with
+/// `on_bad_map = "new"` is warned about and a new map started.
+pub(crate) fn start_map(
+    config: &DaemonConfig,
+    exploration: Option<(
+        crate::explore::ExplorationConfig,
+        crate::explore::DriveConfig,
+    )>,
+) -> Result<LiveMapper, DaemonError> {
+    let Some(path) = &config.map.load else {
+        return Ok(LiveMapper::new(config.mapper, exploration, 0.0));
+    };
+    let mode = config
+        .map
+        .mode()
+        .unwrap_or(crate::pipeline::MapMode::Localize);
+    let loaded = crate::map::file::load(path)
+        .map_err(crate::pipeline::PipelineError::from)
+        .and_then(|m| LiveMapper::from_map(config.mapper, m.contents, mode, exploration, 0.0));
+    match loaded {
+        Ok(live) => {
+            info!(map = %path.display(), ?mode, "starting from a saved map; finding the robot in it");
+            Ok(live)
+        }
+        Err(e) if config.map.new_on_bad_map() => {
+            warn!(
+                map = %path.display(),
+                "cannot start from the map ({}); starting a new one (on_bad_map = \"new\")",
+                error_chain(&e)
+            );
+            Ok(LiveMapper::new(config.mapper, exploration, 0.0))
+        }
+        Err(e) => Err(DaemonError::Map {
+            path: path.clone(),
+            source: e,
+        }),
+    }
 }
 
 /// Everything the loop owns besides the mapper.
@@ -636,6 +682,16 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
             None
         }
     };
+    // The map first: a saved map that cannot be used stops the start
+    // before the sensor and the base are touched.
+    let exploration = config
+        .exploration
+        .enabled
+        .then_some((config.exploration.planner, config.exploration.drive));
+    // Loop-closure optimisations and rebuilds run on a blocking thread; the
+    // loop goes on localizing against the old map meanwhile.
+    let mut live = start_map(&config, exploration)?;
+    live.set_background_optimisation(true);
     let rig = build_rig(&config, t0)?;
     let link = config.link();
     let (scan_tx, mut scan_rx) = watch::channel::<Option<ScanSlot>>(None);
@@ -653,18 +709,10 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     )
     .map_err(DaemonError::Thread)?;
     info!(port = %rig.sensor_port.display(), "sensor thread started");
-    let exploration = config
-        .exploration
-        .enabled
-        .then_some((config.exploration.planner, config.exploration.drive));
     let notifier = Notifier::from_env();
     if let Some(w) = notifier.watchdog() {
         info!(interval_s = w.as_secs_f64(), "systemd watchdog enabled");
     }
-    // Loop-closure optimisations and rebuilds run on a blocking thread; the
-    // loop goes on localizing against the old map meanwhile.
-    let mut live = LiveMapper::new(config.mapper, exploration, 0.0);
-    live.set_background_optimisation(true);
     let mut d = Daemon {
         live,
         base: BaseDriver::new(
@@ -738,7 +786,10 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
                 optimising = None;
                 match result {
                     Ok(result) => d.live.apply_optimisation(result),
-                    Err(e) => error!("the loop-closure optimiser failed: {e}"),
+                    Err(e) => {
+                        error!("the loop-closure optimiser failed: {e}");
+                        d.live.abandon_optimisation();
+                    }
                 }
             }
             Some(report) = report_rx.recv() => d.on_report(&report),
@@ -776,7 +827,10 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     if let Some(task) = optimising.take() {
         match task.await {
             Ok(result) => d.live.apply_optimisation(result),
-            Err(e) => error!("the loop-closure optimiser failed: {e}"),
+            Err(e) => {
+                error!("the loop-closure optimiser failed: {e}");
+                d.live.abandon_optimisation();
+            }
         }
     }
     // Loops that agreed with the graph but were not optimised yet are

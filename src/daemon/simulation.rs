@@ -152,7 +152,7 @@ impl VirtualRobot {
             now: 0.0,
             line: VirtualLine::new(link, emulator, t0),
             live: {
-                let mut live = LiveMapper::new(config.mapper, exploration, 0.0);
+                let mut live = super::runtime::start_map(&config, exploration)?;
                 live.set_background_optimisation(true);
                 live
             },
@@ -244,7 +244,10 @@ impl VirtualRobot {
             };
             let outcome = self.live.on_scan(scan, None);
             self.last_scan_at = Some(self.now);
-            self.score(t, outcome.pose);
+            // Before the robot is found in a loaded map it has no pose.
+            if outcome.rejection.as_deref() != Some(crate::pipeline::NOT_FOUND_YET) {
+                self.score(t, outcome.pose);
+            }
             // The daemon runs the optimisation on a blocking thread and
             // takes the result in when it is done; here it is done at once,
             // so runs stay deterministic on the virtual clock.
@@ -279,6 +282,12 @@ impl VirtualRobot {
             .max_heading_error
             .max(crate::geometry::wrap_angle(estimate.theta - truth_map.theta).abs());
         self.stats.t = self.now;
+    }
+
+    /// The map frame is the world pose `origin` (a loaded map's, made by
+    /// a run that started there), not this run's first pose.
+    pub fn set_map_origin(&mut self, origin: Pose2) {
+        self.origin = Some(origin);
     }
 
     /// Ticks until `done` holds or `limit` virtual seconds have passed;

@@ -265,6 +265,14 @@ impl KeyframeGraph {
         })
     }
 
+    /// The job in flight was lost (its thread failed): the next
+    /// [`take_job`](Self::take_job) covers its loops again.
+    pub fn abandon_job(&mut self) {
+        if self.in_flight.take().is_some() {
+            self.wants_optimisation = true;
+        }
+    }
+
     /// Takes in a job's result: the keyframes it covered get their
     /// optimised poses, later ones follow the last of them rigidly. A
     /// result of a job no longer in flight (superseded by [`Self::settle`])
@@ -425,7 +433,7 @@ impl KeyframeGraph {
             keyframes: &self.keyframes,
             poses: self.graph.poses(),
             current,
-            allow_voting: self.taken % cfg.vote_every.max(1) == 0,
+            allow_voting: self.taken.is_multiple_of(cfg.vote_every.max(1)),
         };
         let found = trace_span!("loop_search")
             .in_scope(|| close_loop(&query, fusion, localizer, global, cfg));

@@ -173,23 +173,23 @@ impl<R: Read> RecordingScans<R> {
                     let last_scan_t = &mut self.last_scan_t;
                     let offset = self.records.offset();
                     self.decoder.feed(&bytes, |event| {
-                        if let DecodeEvent::Reply(frame) = event {
-                            if let Reply::ScanData(scan) = frame.reply {
-                                let t = seconds(scan_time_us(t_us, &scan, baud));
-                                if let Some(rs) = range_scan(&scan, t, mode) {
-                                    let previous = waiting.back().map(|w| w.t).or(*last_scan_t);
-                                    match previous.filter(|&p| rs.t <= p) {
-                                        Some(previous) => {
-                                            skipped.push_back(InputError::ScanOutOfOrder {
-                                                at: format!("recording byte {offset}"),
-                                                t: rs.t,
-                                                previous,
-                                            })
-                                        }
-                                        None => {
-                                            *last_scan_t = Some(rs.t);
-                                            waiting.push_back(rs);
-                                        }
+                        if let DecodeEvent::Reply(frame) = event
+                            && let Reply::ScanData(scan) = frame.reply
+                        {
+                            let t = seconds(scan_time_us(t_us, &scan, baud));
+                            if let Some(rs) = range_scan(&scan, t, mode) {
+                                let previous = waiting.back().map(|w| w.t).or(*last_scan_t);
+                                match previous.filter(|&p| rs.t <= p) {
+                                    Some(previous) => {
+                                        skipped.push_back(InputError::ScanOutOfOrder {
+                                            at: format!("recording byte {offset}"),
+                                            t: rs.t,
+                                            previous,
+                                        })
+                                    }
+                                    None => {
+                                        *last_scan_t = Some(rs.t);
+                                        waiting.push_back(rs);
                                     }
                                 }
                             }

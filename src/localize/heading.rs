@@ -118,10 +118,15 @@ pub fn localize_searching_heading(
         cfg.correspondence.max_angle_diff,
         cfg.heading_search,
     );
+    // The searched heading is known only to about the vote's width, not
+    // to the prediction's σ: the prior's heading is widened to that.
+    let separation = cfg.correspondence.max_angle_diff;
+    let mut searched_prior = *prior;
+    searched_prior[2][2] = prior[2][2].max(separation * separation);
     let mut best: Option<LocalizationResult> = None;
     for rotation in candidates {
         let start = Pose2::new(predicted.x, predicted.y, predicted.theta + rotation);
-        let Ok(fix) = localize(local, map, start, prior, cfg) else {
+        let Ok(fix) = localize(local, map, start, &searched_prior, cfg) else {
             continue;
         };
         let dx = (fix.pose.x - predicted.x).hypot(fix.pose.y - predicted.y);

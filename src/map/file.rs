@@ -212,8 +212,45 @@ fn matrix(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
     std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
 }
 
+/// Whether every number `contents` would store is finite: JSON has no
+/// NaN (serde writes `null`), and a map that saves must load.
+fn storable(contents: &MapContents) -> Result<(), String> {
+    if let Some(i) = contents
+        .walls
+        .iter()
+        .position(|w| !all_finite(line_numbers(&w.line)))
+    {
+        return Err(format!("wall {i} has a non-finite number"));
+    }
+    for (i, (k, p)) in contents.keyframes.iter().zip(&contents.poses).enumerate() {
+        let numbers = [k.t, k.travelled, p.x, p.y, p.theta]
+            .into_iter()
+            .chain(k.covariance.iter().flatten().copied())
+            .chain(k.lines.iter().flat_map(line_numbers))
+            .chain(
+                k.region
+                    .iter()
+                    .flat_map(|r| &r.edges)
+                    .flat_map(|e| [e.start[0], e.start[1]]),
+            );
+        if !all_finite(numbers) {
+            return Err(format!("keyframe {i} has a non-finite number"));
+        }
+    }
+    if let Some(i) = contents.edges.iter().position(|e| {
+        !all_finite([e.measurement.x, e.measurement.y, e.measurement.theta])
+            || !e.information.iter().all(|v| v.is_finite())
+    }) {
+        return Err(format!("edge {i} has a non-finite number"));
+    }
+    Ok(())
+}
+
 /// The payload of `contents` as stored, compact JSON, into `out`.
 fn write_payload(out: &mut impl std::io::Write, contents: &MapContents) -> std::io::Result<()> {
+    storable(contents).map_err(|why| {
+        std::io::Error::new(std::io::ErrorKind::InvalidData, format!("not saved: {why}"))
+    })?;
     let items: Vec<ClsmItem> = contents.cls.items();
     let payload = PayloadView {
         segments: items.iter().map(record).collect(),
@@ -384,7 +421,17 @@ fn inconsistent(what: String) -> StoreError {
 /// semi-definite information matrix.
 fn checked_contents(cls: ClsMap, payload: Payload) -> Result<MapContents, StoreError> {
     let mut ids = std::collections::HashSet::new();
+    // Ids index memory on load: a few per wall (ids of bridged walls stay
+    // free), never millions more than there are walls.
+    let max_id = 16 * payload.walls.len() as u64 + 1024;
     for (i, w) in payload.walls.iter().enumerate() {
+        if u64::from(w.id.0) > max_id {
+            return Err(inconsistent(format!(
+                "wall {i}'s id {} is far beyond the {} walls stored",
+                w.id.0,
+                payload.walls.len()
+            )));
+        }
         if !all_finite(line_numbers(&w.line)) {
             return Err(inconsistent(format!("wall {i} has a non-finite number")));
         }
@@ -546,6 +593,17 @@ mod tests {
         assert_eq!(back.contents.poses, c.poses);
         assert_eq!(back.contents.edges, c.edges);
         assert_eq!(*back.contents.keyframes[1], *c.keyframes[1]);
+    }
+
+    #[test]
+    fn a_map_that_would_not_load_is_not_saved() {
+        let mut c = contents();
+        c.walls[0].line.xc = f64::NAN;
+        assert!(encode(&c).is_err());
+        let mut c = contents();
+        c.walls[0].id = crate::localize::SegmentId(4_000_000_000);
+        let text = encode(&c).unwrap();
+        assert!(matches!(decode(&text), Err(StoreError::Inconsistent(_))));
     }
 
     #[test]

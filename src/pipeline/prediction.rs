@@ -249,6 +249,14 @@ impl MotionPredictor {
         self.anchor = None;
     }
 
+    /// The pose just recorded is a jump (the robot found again elsewhere),
+    /// not motion: no velocity to extrapolate, and the odometry is anchored
+    /// afresh at the next scan that has it.
+    pub fn jumped(&mut self) {
+        self.last_step = None;
+        self.anchor = None;
+    }
+
     /// Moves the poses the predictor holds into a corrected map frame:
     /// `correction ∘ pose` (after a loop closure moved the map under the
     /// robot). The covariances are kept; the correction's rotation is small

@@ -186,13 +186,13 @@ fn run(
         let now = Instant::now();
         apply_controls(&mut emulator, controls, now);
         // The host's line speed, as its termios says.
-        if let Ok(bps) = master.baud_rate() {
-            if bps != host_bps {
-                host_bps = bps;
-                // A speed the LMS200 cannot run at never matches the sensor.
-                let baud = Baud::from_bits_per_second(bps);
-                emulator.set_host_baud(baud.unwrap_or_else(|| mismatched(emulator.baud())));
-            }
+        if let Ok(bps) = master.baud_rate()
+            && bps != host_bps
+        {
+            host_bps = bps;
+            // A speed the LMS200 cannot run at never matches the sensor.
+            let baud = Baud::from_bits_per_second(bps);
+            emulator.set_host_baud(baud.unwrap_or_else(|| mismatched(emulator.baud())));
         }
         if let Some(bytes) = emulator.poll_transmit(now) {
             write_or_drop(&mut master, &bytes)?;
@@ -220,15 +220,15 @@ fn run(
 }
 
 fn apply_controls(emulator: &mut Emulator, controls: &Controls, now: Instant) {
-    if let Ok(mut f) = controls.faults.lock() {
-        if let Some(faults) = f.take() {
-            emulator.set_faults(faults);
-        }
+    if let Ok(mut f) = controls.faults.lock()
+        && let Some(faults) = f.take()
+    {
+        emulator.set_faults(faults);
     }
-    if let Ok(mut s) = controls.silence.lock() {
-        if let Some(d) = s.take() {
-            emulator.silence(now, d);
-        }
+    if let Ok(mut s) = controls.silence.lock()
+        && let Some(d) = s.take()
+    {
+        emulator.silence(now, d);
     }
     if controls.power_cycle.swap(false, Ordering::SeqCst) {
         emulator.power_cycle(now);

@@ -298,7 +298,7 @@ impl Reply {
             SCAN_CODE => Reply::ScanData(Scan::parse(data)?),
             code::STATUS => Reply::Status(data.to_vec()),
             code::ERRORS => {
-                if data.len() % 2 != 0 {
+                if !data.len().is_multiple_of(2) {
                     return Err(length_error(code, data.len() + 1, data.len()));
                 }
                 Reply::ErrorList(

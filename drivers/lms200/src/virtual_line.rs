@@ -175,11 +175,11 @@ impl Wire {
     ) {
         loop {
             self.flush(link, emulator, &mut on_output);
-            if !self.settled {
-                if let Some(bytes) = emulator.poll_transmit(self.now) {
-                    link.handle_input(&bytes, self.now);
-                    continue;
-                }
+            if !self.settled
+                && let Some(bytes) = emulator.poll_transmit(self.now)
+            {
+                link.handle_input(&bytes, self.now);
+                continue;
             }
             match self.next_deadline(link, emulator) {
                 Some(next) if next <= until => self.run_due(next, link, emulator),

@@ -54,10 +54,10 @@ fn run(
                     Event::Scan(s) => {
                         seen.scans += 1;
                         seen.value_counts.push(s.scan.values.len());
-                        if seen.scans == 2 {
-                            if let Some(f) = during.take() {
-                                f(&pty);
-                            }
+                        if seen.scans == 2
+                            && let Some(f) = during.take()
+                        {
+                            f(&pty);
                         }
                     }
                     Event::SensorRestarted => seen.restarts += 1,
@@ -258,10 +258,10 @@ fn a_recording_replays_to_the_same_scans() {
     for record in reader {
         match record.unwrap() {
             Record::Rx { bytes, .. } => decoder.feed(&bytes, |ev| {
-                if let lms200::DecodeEvent::Reply(frame) = ev {
-                    if let lms200::Reply::ScanData(scan) = frame.reply {
-                        replayed.push(scan.values);
-                    }
+                if let lms200::DecodeEvent::Reply(frame) = ev
+                    && let lms200::Reply::ScanData(scan) = frame.reply
+                {
+                    replayed.push(scan.values);
                 }
             }),
             Record::Baud { baud, .. } => bauds.push(baud),

@@ -71,7 +71,7 @@ impl Emulator {
         self.stats.requests += 1;
         if let Some(n) = self.faults.nak_every_nth_request
             && n > 0
-            && self.stats.requests % u64::from(n) == 0
+            && self.stats.requests.is_multiple_of(u64::from(n))
         {
             self.stats.naks += 1;
             self.fault_counts.forced_naks += 1;
