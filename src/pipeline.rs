@@ -651,6 +651,16 @@ impl OfflineMapper {
         )
     }
 
+    /// Where the robot stands in a loaded map: `None` for a new map or
+    /// once found (and not lost); else the search's hypotheses so far.
+    pub fn map_search(&self) -> Option<MapSearch> {
+        match (&self.start, &self.relocalizer) {
+            (Some(s), _) => Some(MapSearch::Finding(s.hypotheses())),
+            (None, Some(s)) => Some(MapSearch::Lost(s.hypotheses())),
+            (None, None) => None,
+        }
+    }
+
     /// A job taken with [`take_optimisation`](Self::take_optimisation) was
     /// lost (its thread failed): the next one takes its loops in.
     pub fn abandon_optimisation(&mut self) {
@@ -1063,6 +1073,15 @@ pub struct MapRunOptions<'a> {
     /// Go on from a saved map, localizing in it or extending it, instead
     /// of starting a new one.
     pub start_from: Option<(&'a Path, MapMode)>,
+}
+
+/// A search for the robot in a loaded map, with its hypotheses so far.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum MapSearch {
+    /// Not found yet since the start.
+    Finding(usize),
+    /// Lost after being found; being looked for again.
+    Lost(usize),
 }
 
 /// [`ScanOutcome::rejection`] of a scan before the robot was found in a

@@ -35,7 +35,7 @@ const MAX_EXTRAPOLATION: f64 = 0.1;
 const ODOMETRY_HISTORY: f64 = 2.0;
 
 /// A snapshot for the status line and `STATUS=`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
 pub struct LiveStatus {
     pub scans: u64,
     pub localized: u64,
@@ -52,6 +52,8 @@ pub struct LiveStatus {
     pub exploring: bool,
     pub exploration_complete: bool,
     pub explorer: Option<ExplorerStats>,
+    /// In a loaded map: still being found, or lost (with the hypotheses).
+    pub map_search: Option<crate::pipeline::MapSearch>,
 }
 
 /// The mapper, the odometry buffer and the explorer of a running robot.
@@ -311,6 +313,7 @@ impl LiveMapper {
             exploring: self.explorer.as_ref().is_some_and(|e| !e.is_complete()),
             exploration_complete: self.exploration_complete(),
             explorer: self.explorer.as_ref().map(|e| e.stats()),
+            map_search: self.mapper.map_search(),
         }
     }
 

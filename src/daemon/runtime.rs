@@ -363,6 +363,15 @@ fn status_line(s: &LiveStatus, rate: f64, sensor: &str) -> String {
             )
         },
     );
+    let pose = match s.map_search {
+        Some(crate::pipeline::MapSearch::Finding(n)) => {
+            format!("localizing in the loaded map ({n} hypotheses)")
+        }
+        Some(crate::pipeline::MapSearch::Lost(n)) => {
+            format!("LOST in the loaded map ({n} hypotheses), {pose}")
+        }
+        None => pose,
+    };
     let exploring = if s.exploration_complete {
         ", exploration complete"
     } else if s.exploring {
@@ -893,5 +902,32 @@ fn log_report(report: &SensorReport) {
             Event::Closed => info!("sensor link closed"),
             Event::Scan(_) => {}
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::MapSearch;
+
+    #[test]
+    fn the_status_line_says_where_the_robot_stands_in_a_loaded_map() {
+        let mut s = LiveStatus {
+            pose: Some(Pose2::new(1.0, 2.0, 0.0)),
+            ..LiveStatus::default()
+        };
+        assert!(status_line(&s, 37.5, "streaming").contains("pose (1.00, 2.00, 0°)"));
+        s.map_search = Some(MapSearch::Finding(3));
+        let line = status_line(&s, 37.5, "streaming");
+        assert!(
+            line.contains("localizing in the loaded map (3 hypotheses)"),
+            "{line}"
+        );
+        s.map_search = Some(MapSearch::Lost(0));
+        let line = status_line(&s, 37.5, "streaming");
+        assert!(
+            line.contains("LOST in the loaded map (0 hypotheses), pose"),
+            "{line}"
+        );
     }
 }
