@@ -486,7 +486,10 @@ impl Daemon {
             );
             self.silence_logged = true;
         }
-        self.base.control(&mut self.live, sensor_ok, now, None);
+        // A robot not (or no longer) found in a loaded map does not drive.
+        let placed = self.live.mapper().map_search().is_none();
+        self.base
+            .control(&mut self.live, sensor_ok && placed, now, None);
         if self.config.exploration.exit_when_complete && self.live.exploration_complete() {
             return Some(StopReason::ExplorationComplete);
         }

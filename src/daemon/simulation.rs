@@ -260,8 +260,10 @@ impl VirtualRobot {
             .last_scan_at
             .is_some_and(|t| self.now - t <= self.silence_stop);
         let manual = drive(&self.live, self.now);
+        // A robot not (or no longer) found in a loaded map does not drive.
+        let placed = self.live.mapper().map_search().is_none();
         self.base
-            .control(&mut self.live, sensor_ok, self.now, manual);
+            .control(&mut self.live, sensor_ok && placed, self.now, manual);
     }
 
     fn score(&mut self, t: f64, estimate: Pose2) {
