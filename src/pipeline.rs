@@ -670,16 +670,19 @@ impl OfflineMapper {
     /// Takes in an optimisation's result: keyframes, trajectory and
     /// predictor move to the corrected poses, the walls and the CLS map
     /// become the job's rebuild plus the keyframes taken since it started.
-    pub fn apply_optimisation(&mut self, result: OptimisationResult) {
+    /// Returns the map-frame correction of the newest keyframe
+    /// (`new = correction ∘ old`), for poses held outside the mapper.
+    pub fn apply_optimisation(&mut self, result: OptimisationResult) -> Option<Pose2> {
         let applied = match self.graph.apply_job(result) {
             Ok(Some(applied)) => applied,
-            Ok(None) => return,
+            Ok(None) => return None,
             Err(e) => {
                 warn!("pose graph not optimised: {e}");
-                return;
+                return None;
             }
         };
         self.follow_correction(&applied.correction);
+        let correction = applied.correction.correction;
         let AppliedOptimisation {
             mut walls,
             mut cls,
@@ -700,6 +703,7 @@ impl OfflineMapper {
             self.cls = cls;
             self.cls_stale = false;
         }
+        Some(correction)
     }
 
     /// Processes one scan; returns what became of it.

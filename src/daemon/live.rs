@@ -149,9 +149,18 @@ impl LiveMapper {
     }
 
     /// See [`OfflineMapper::apply_optimisation`].
+    /// The live pose and the picture's path move with the map (by the
+    /// newest keyframe's correction).
     pub fn apply_optimisation(&mut self, result: crate::graph::OptimisationResult) {
         let _span = info_span!("apply_optimisation").entered();
-        self.mapper.apply_optimisation(result);
+        if let Some(c) = self.mapper.apply_optimisation(result) {
+            if let Some((_, pose, _)) = self.last_fix.as_mut() {
+                *pose = c.compose(pose);
+            }
+            for p in &mut self.picture_path {
+                *p = c.compose(p);
+            }
+        }
     }
 
     pub fn latencies(&self) -> &Latencies {
