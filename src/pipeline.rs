@@ -993,7 +993,13 @@ impl OfflineMapper {
             }
         }
         self.trajectory.push((record.scan.t, outcome.pose));
-        let anchor = self.anchor_keyframe.or(self.graph.len().checked_sub(1));
+        // Before a resumed session's first keyframe, the last keyframe is
+        // the old session's, anywhere in the map: no anchor.
+        let anchor = if self.first_session_keyframe {
+            None
+        } else {
+            self.anchor_keyframe.or(self.graph.len().checked_sub(1))
+        };
         self.anchors
             .push(anchor.map(|k| (k, self.graph.poses()[k].between(&outcome.pose))));
         self.summary.scans += 1;

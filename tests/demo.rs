@@ -43,3 +43,52 @@ fn the_demo_world_is_explored_to_completion_through_the_pty() {
         assert!(out.join(file).is_file(), "{file} missing");
     }
 }
+
+/// Hardening: when the run's directory stops taking the map (here
+/// `map.json` replaced by a directory mid-run), the last save goes to a
+/// rescue directory beside the run's, inside the state directory — not
+/// under `$TMPDIR`, which the unit's `PrivateTmp=` empties at stop — and
+/// the rescue is whole: every pose of the run, including those written to
+/// the run's directory before it failed.
+#[test]
+fn a_rescued_map_is_whole_and_kept_in_the_state_directory() {
+    let dir = std::env::temp_dir().join(format!("clsmap-rescue-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut config = clsmap::demo::demo_config().unwrap();
+    config.daemon.max_run_time = 4.0;
+    config.daemon.checkpoint_interval = 1.0;
+    config.daemon.state_dir = Some(dir.join("state"));
+    config.exploration.exit_when_complete = false;
+    let run_dir = dir.join("state").join("run");
+    let blocked = run_dir.join("map.json");
+    let mut hooks = clsmap::daemon::Hooks::until(std::future::pending());
+    hooks.out_dir = Some(run_dir.clone());
+    let mut broke = false;
+    hooks.on_scan = Some(Box::new(move |p| {
+        if p.t > 2.5 && !broke && blocked.is_file() {
+            std::fs::remove_file(&blocked).unwrap();
+            std::fs::create_dir_all(blocked.join("in-the-way")).unwrap();
+            broke = true;
+        }
+    }));
+    let summary = clsmap::daemon::run_blocking(config, hooks).unwrap();
+    let why = summary
+        .rescued_because
+        .clone()
+        .expect("the map was rescued");
+    let rescue = summary.out_dir.clone().unwrap();
+    assert!(why.contains("map.json") || why.contains("run"), "{why}");
+    assert_eq!(
+        rescue.parent(),
+        Some(dir.join("state").as_path()),
+        "{rescue:?}"
+    );
+    let poses = std::fs::read_to_string(rescue.join("trajectory.tum"))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .count() as u64;
+    assert_eq!(poses, summary.scans, "every pose of the run in the rescue");
+    clsmap::map::file::load(&rescue.join("map.json")).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -656,7 +656,21 @@ impl Daemon {
         };
         error!("cannot save the map in {first}");
         let mut tried = vec![first.clone()];
-        for parent in [self.state_dir.clone(), std::env::temp_dir()] {
+        // Beside the run's directory, then beside the state directory: not
+        // under $TMPDIR, which the unit's PrivateTmp= empties at stop.
+        let mut parents = vec![self.state_dir.clone()];
+        if let Some(up) = self
+            .state_dir
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+        {
+            parents.push(up.to_path_buf());
+        }
+        let earlier = self
+            .out_dir
+            .as_ref()
+            .map(|d| d.join(crate::pipeline::TRAJECTORY_FILE));
+        for parent in parents {
             let rescue = match new_dir(&parent, "rescue") {
                 Ok(dir) => dir,
                 Err(e) => {
@@ -664,12 +678,27 @@ impl Daemon {
                     continue;
                 }
             };
-            match self.live.checkpoint(&rescue) {
+            // The rescue is whole: the poses the run's directory holds
+            // already come first, then the ones not written yet.
+            let copied = match &earlier {
+                Some(path) if path.is_file() => {
+                    std::fs::copy(path, rescue.join(crate::pipeline::TRAJECTORY_FILE)).map(|_| ())
+                }
+                _ => Ok(()),
+            };
+            match copied
+                .map_err(|e| e.to_string())
+                .and_then(|()| self.live.checkpoint(&rescue).map_err(|e| error_chain(&e)))
+            {
                 Ok(()) => {
                     error!(dir = %rescue.display(), "map saved to a rescue directory instead");
                     return Ok((Some(rescue), Some(first)));
                 }
-                Err(e) => tried.push(format!("{}: {}", rescue.display(), error_chain(&e))),
+                Err(e) => {
+                    tried.push(format!("{}: {e}", rescue.display()));
+                    // Nothing half-written is left behind.
+                    let _ = std::fs::remove_dir_all(&rescue);
+                }
             }
         }
         Err(DaemonError::Save {
