@@ -242,7 +242,24 @@ impl MapperConfig {
     /// unknown-key errors carry line and column, range errors the key.
     pub fn from_toml(text: &str) -> Result<MapperConfig, ConfigError> {
         let config: MapperConfig = toml::from_str(text)?;
-        config.validate()?;
+        config.validate().map_err(|e| match e {
+            ConfigError::Range {
+                key, value, rule, ..
+            } => {
+                // `[section] key` as the dotted path TOML spells.
+                let dotted = match key.strip_prefix('[').and_then(|k| k.split_once("] ")) {
+                    Some((section, name)) => format!("{section}.{name}"),
+                    None => key.clone(),
+                };
+                ConfigError::Range {
+                    line: line_of_key(text, &dotted),
+                    key,
+                    value,
+                    rule,
+                }
+            }
+            other => other,
+        })?;
         Ok(config)
     }
 
@@ -492,6 +509,7 @@ impl Validator {
             },
             value,
             rule: rule.into(),
+            line: None,
         }
     }
 
@@ -527,13 +545,35 @@ pub enum ConfigError {
     /// names the line and column.
     #[error(transparent)]
     Parse(#[from] toml::de::Error),
-    /// A value outside the range the mapper can work with.
-    #[error("{key} = {value}: must be {rule}")]
+    /// A value outside the range the mapper can work with; `line` where
+    /// it is written, when the TOML text is known.
+    #[error("{key}{} = {value}: must be {rule}", line.map(|l| format!(" (line {l})")).unwrap_or_default())]
     Range {
         key: String,
         value: f64,
         rule: String,
+        line: Option<usize>,
     },
+}
+
+/// The line (1-based) where the dotted `key` is written in the TOML
+/// `text`, or where its table is, if the key itself is not written.
+pub fn line_of_key(text: &str, key: &str) -> Option<usize> {
+    let doc = toml::de::DeTable::parse(text).ok()?;
+    let mut table = doc.get_ref();
+    let mut found = None;
+    let parts: Vec<&str> = key.split('.').collect();
+    for (i, part) in parts.iter().enumerate() {
+        let (k, v) = table.get_key_value(*part)?;
+        found = Some(k.span().start);
+        if i + 1 < parts.len() {
+            match v.get_ref() {
+                toml::de::DeValue::Table(t) => table = t,
+                _ => break,
+            }
+        }
+    }
+    found.map(|offset| text[..offset.min(text.len())].matches('\n').count() + 1)
 }
 
 #[cfg(test)]
@@ -547,6 +587,16 @@ mod tests {
             MapperConfig::from_toml("").unwrap(),
             MapperConfig::default()
         );
+    }
+
+    /// Range errors name the key and the line it is on, as the daemon's do.
+    #[test]
+    fn range_errors_name_their_line() {
+        let e =
+            MapperConfig::from_toml("# x\n[localizer]\ngate_sigmas = 3.0\nmax_iterations = 0\n")
+                .unwrap_err()
+                .to_string();
+        assert!(e.contains("[localizer] max_iterations (line 4)"), "{e}");
     }
 
     /// `config/mapper.toml` says every key is optional: so is each field

@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::explore::{DriveConfig, ExplorationConfig};
 use crate::geometry::Pose2;
-use crate::mapping_config::MapperConfig;
+use crate::mapping_config::{MapperConfig, line_of_key};
 
 /// Everything the daemon needs.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -566,26 +566,6 @@ fn mapper_key(key: &str) -> String {
         Some((section, name)) => format!("mapper.{section}.{name}"),
         None => format!("mapper.{key}"),
     }
-}
-
-/// The line (1-based) where the dotted `key` is written in the TOML
-/// `text`, or where its table is, if the key itself is not written.
-pub fn line_of_key(text: &str, key: &str) -> Option<usize> {
-    let doc = toml::de::DeTable::parse(text).ok()?;
-    let mut table = doc.get_ref();
-    let mut found = None;
-    let parts: Vec<&str> = key.split('.').collect();
-    for (i, part) in parts.iter().enumerate() {
-        let (k, v) = table.get_key_value(*part)?;
-        found = Some(k.span().start);
-        if i + 1 < parts.len() {
-            match v.get_ref() {
-                toml::de::DeValue::Table(t) => table = t,
-                _ => break,
-            }
-        }
-    }
-    found.map(|offset| text[..offset.min(text.len())].matches('\n').count() + 1)
 }
 
 #[cfg(test)]

@@ -405,8 +405,11 @@ impl KeyframeGraph {
                 by_voting: false,
             };
             let edge = seen.edge(index, &self.graph.poses()[j], cfg);
-            if let Err(e) = self.graph.add_edge(edge) {
-                debug!("relocalization edge refused: {e}");
+            match self.graph.add_edge(edge) {
+                // A loop edge like any other: counted until optimised (and
+                // uncounted if its keyframe is merged as a revisit).
+                Ok(()) => self.unoptimised_loops += 1,
+                Err(e) => debug!("relocalization edge refused: {e}"),
             }
         }
         index
