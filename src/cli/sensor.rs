@@ -194,7 +194,7 @@ pub fn decode(
             .with_context(|| format!("measuring mode {code:02x} is reserved"))?,
         None => MeasuringMode::Bits13FieldsAbDazzle,
     };
-    let input =
+    let mut input =
         std::fs::File::open(file).with_context(|| format!("cannot open {}", file.display()))?;
     let stdout = std::io::stdout();
     let mut out = BufWriter::new(stdout.lock());
@@ -226,15 +226,27 @@ pub fn decode(
     let mut broke = None;
     let mut damaged = 0usize;
     if raw {
-        let mut bytes = Vec::new();
-        std::io::BufReader::new(input)
-            .read_to_end(&mut bytes)
-            .with_context(|| format!("cannot read {}", file.display()))?;
+        // Streamed in chunks, so a dump of any size (or a device that never
+        // ends) is decoded in constant memory.
+        let mut chunk = vec![0u8; 64 * 1024];
         let mut scans = Vec::new();
-        decoder.feed(&bytes, |ev| collect_scan(ev, &mut scans));
-        for (i, (scan, status)) in scans.iter().enumerate() {
-            // A raw dump has no clock: number the scans instead.
-            emit(scan, *status, i as f64, mode)?;
+        let mut number = 0usize;
+        loop {
+            let n = match input.read(&mut chunk) {
+                Ok(0) => break,
+                Ok(n) => n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => {
+                    return Err(anyhow::Error::new(e))
+                        .with_context(|| format!("cannot read {}", file.display()));
+                }
+            };
+            decoder.feed(&chunk[..n], |ev| collect_scan(ev, &mut scans));
+            for (scan, status) in scans.drain(..) {
+                // A raw dump has no clock: number the scans instead.
+                emit(&scan, status, number as f64, mode)?;
+                number += 1;
+            }
         }
     } else {
         let reader = RecordingReader::new(std::io::BufReader::new(input))
