@@ -149,8 +149,8 @@ impl LiveMapper {
     }
 
     /// See [`OfflineMapper::apply_optimisation`].
-    /// The live pose and the picture's path move with the map (by the
-    /// newest keyframe's correction).
+    /// The live pose, the picture's path and the explorer's goal move with
+    /// the map (by the newest keyframe's correction).
     pub fn apply_optimisation(&mut self, result: crate::graph::OptimisationResult) {
         let _span = info_span!("apply_optimisation").entered();
         if let Some(c) = self.mapper.apply_optimisation(result) {
@@ -159,6 +159,9 @@ impl LiveMapper {
             }
             for p in &mut self.picture_path {
                 *p = c.compose(p);
+            }
+            if let Some(explorer) = &mut self.explorer {
+                explorer.reframe(&c);
             }
         }
     }

@@ -101,6 +101,15 @@ impl Explorer {
     }
 
     /// The goal driven to, if any.
+    /// The map moved under the robot (a loop closure, `new = correction ∘
+    /// old`): the goal and the path to it follow, so the robot does not
+    /// drive to where the goal was in the old frame.
+    pub fn reframe(&mut self, correction: &Pose2) {
+        if let State::Driving { follower, .. } = &mut self.state {
+            follower.reframe(correction);
+        }
+    }
+
     pub fn goal(&self) -> Option<Pose2> {
         match &self.state {
             State::Driving { follower, .. } => Some(follower.goal()),

@@ -112,6 +112,15 @@ pub struct PathFollower {
 }
 
 impl PathFollower {
+    /// The map moved under the path (a loop closure): path and goal follow
+    /// it, `new = correction ∘ old`.
+    pub fn reframe(&mut self, correction: &Pose2) {
+        for p in &mut self.path {
+            *p = correction.transform_point(*p);
+        }
+        self.goal = correction.compose(&self.goal);
+    }
+
     /// Follows `path` (map frame, from the robot to the goal's position)
     /// and turns to `goal.theta` at its end.
     pub fn new(path: Vec<[f64; 2]>, goal: Pose2) -> PathFollower {
@@ -220,6 +229,24 @@ mod tests {
             t += dt;
         }
         panic!("not arrived: {pose:?}");
+    }
+
+    /// After a loop closure moved the map, the follower drives to the goal
+    /// in the new frame: where the old goal is now.
+    #[test]
+    fn a_reframed_path_leads_to_the_moved_goal() {
+        let cfg = DriveConfig::default();
+        let goal = Pose2::new(4.0, 0.0, 0.0);
+        let mut f = PathFollower::new(vec![[0.0, 0.0], [4.0, 0.0]], goal);
+        let c = Pose2::new(0.5, -0.3, 0.1);
+        f.reframe(&c);
+        let moved = c.compose(&goal);
+        assert_eq!(f.goal(), moved);
+        let (end, _, _) = drive(f, c, &cfg);
+        assert!(
+            (end.x - moved.x).abs() <= 0.05 && (end.y - moved.y).abs() <= 0.05,
+            "{end:?}"
+        );
     }
 
     #[test]
