@@ -247,9 +247,18 @@ pub(crate) fn start_map(
         .map
         .mode()
         .unwrap_or(crate::pipeline::MapMode::Localize);
+    // A map that does not grow never closes its frontiers: exploring it
+    // would chase them for ever.
+    let explore_loaded = match (mode, exploration) {
+        (crate::pipeline::MapMode::Localize, Some(_)) => {
+            warn!("[map] mode = \"localize\": exploration is off (the map does not grow)");
+            None
+        }
+        (_, exploration) => exploration,
+    };
     let loaded = crate::map::file::load(path)
         .map_err(crate::pipeline::PipelineError::from)
-        .and_then(|m| LiveMapper::from_map(config.mapper, m.contents, mode, exploration, 0.0));
+        .and_then(|m| LiveMapper::from_map(config.mapper, m.contents, mode, explore_loaded, 0.0));
     match loaded {
         Ok(live) => {
             info!(map = %path.display(), ?mode, "starting from a saved map; finding the robot in it");
