@@ -55,7 +55,7 @@ fn a_rescued_map_is_whole_and_kept_in_the_state_directory() {
     let dir = std::env::temp_dir().join(format!("clsmap-rescue-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let mut config = clsmap::demo::demo_config().unwrap();
-    config.daemon.max_run_time = 4.0;
+    config.daemon.max_run_time = 6.0;
     config.daemon.checkpoint_interval = 1.0;
     config.daemon.state_dir = Some(dir.join("state"));
     config.exploration.exit_when_complete = false;
@@ -64,8 +64,10 @@ fn a_rescued_map_is_whole_and_kept_in_the_state_directory() {
     let mut hooks = clsmap::daemon::Hooks::until(std::future::pending());
     hooks.out_dir = Some(run_dir.clone());
     let mut broke = false;
-    hooks.on_scan = Some(Box::new(move |p| {
-        if p.t > 2.5 && !broke && blocked.is_file() {
+    hooks.on_scan = Some(Box::new(move |_| {
+        // Once a checkpoint has written the map there (scans before it
+        // are in the run's trajectory), the directory stops taking it.
+        if !broke && blocked.is_file() {
             std::fs::remove_file(&blocked).unwrap();
             std::fs::create_dir_all(blocked.join("in-the-way")).unwrap();
             broke = true;
