@@ -83,7 +83,12 @@ pub struct LocalizerConfig {
     /// Floor on a line's σθ (rad) before weighting. Default 0.0005.
     pub min_sigma_theta: f64,
     /// A translation direction whose marginal standard deviation from the
-    /// lines alone exceeds this (m) is declared unobservable. Default 0.05.
+    /// lines alone exceeds this (m) is declared unobservable: the pose keeps
+    /// the prediction along it and the lines' information there is dropped.
+    /// Default 0.15: a corridor's door jambs seen at a grazing angle pin it
+    /// to 5–15 cm per scan, which is worth fusing with the odometry; at
+    /// 0.05 that was thrown away on 89 % of the corridor world's scans
+    /// (mean pose error 235 → 129 mm with 0.15; CSAIL unchanged).
     pub max_observable_sigma: f64,
     /// Inflate the covariance by `χ²/dof` when that exceeds 1. Default true.
     pub scale_covariance_by_residual: bool,
@@ -118,7 +123,7 @@ impl Default for LocalizerConfig {
             max_rotation_jump: 0.35,
             min_sigma_c: 0.001,
             min_sigma_theta: 0.0005,
-            max_observable_sigma: 0.05,
+            max_observable_sigma: 0.15,
             scale_covariance_by_residual: true,
             validation_gate_sigmas: 4.0,
             robust_kernel_scale: 3.0,
