@@ -573,6 +573,18 @@ impl Daemon {
         }
     }
 
+    /// Takes in a background optimisation's result; a job whose thread
+    /// failed is abandoned, so the next one takes its loops in.
+    fn optimisation_done(&mut self, result: Result<OptimisationResult, tokio::task::JoinError>) {
+        match result {
+            Ok(result) => self.live.apply_optimisation(result),
+            Err(e) => {
+                error!("the loop-closure optimiser failed: {e}");
+                self.live.abandon_optimisation();
+            }
+        }
+    }
+
     fn reload(&mut self, path: &Option<PathBuf>) {
         let Some(path) = path else {
             info!("reload asked for, but no configuration file to re-read");
@@ -834,13 +846,7 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
                 }
             } => {
                 optimising = None;
-                match result {
-                    Ok(result) => d.live.apply_optimisation(result),
-                    Err(e) => {
-                        error!("the loop-closure optimiser failed: {e}");
-                        d.live.abandon_optimisation();
-                    }
-                }
+                d.optimisation_done(result);
             }
             Some(report) = report_rx.recv() => d.on_report(&report),
             _ = base_tick.tick() => {
@@ -875,13 +881,8 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
         d.checkpoint_done(result);
     }
     if let Some(task) = optimising.take() {
-        match task.await {
-            Ok(result) => d.live.apply_optimisation(result),
-            Err(e) => {
-                error!("the loop-closure optimiser failed: {e}");
-                d.live.abandon_optimisation();
-            }
-        }
+        let result = task.await;
+        d.optimisation_done(result);
     }
     // Loops that agreed with the graph but were not optimised yet are
     // taken in before the last save.
