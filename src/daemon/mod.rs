@@ -2,21 +2,26 @@
 //!
 //! - [`base_driver`]: [`BaseDriver`](base_driver::BaseDriver), commands with limits and safety stops.
 //! - [`checkpoint`]: map snapshots written off the loop.
+//! - [`core`]: [`Core`](core::Core), the loop without the loop (sans-IO): scans,
+//!   odometry and the clock in; commands, checkpoints, optimisations and status out.
 //! - [`config`]: [`DaemonConfig`], the TOML file, checked with key and line.
 //! - [`live`]: [`LiveMapper`], the loop's work without the loop (sans-IO).
 //! - [`latency`]: per-stage latency histograms.
 //! - [`sensor`]: the serial driver's thread, latest scan wins.
 //! - [`notify`]: systemd's READY/WATCHDOG/STATUS/STOPPING.
-//! - [`runtime`]: the tokio loop wiring it all, [`run`].
-//! - [`simulation`]: the simulated robot and [`VirtualRobot`](simulation::VirtualRobot): the same loop on a virtual clock, faster than real
+//! - [`run_dir`]: the run's directory and the rescue of a map that cannot go there.
+//! - [`runtime`]: the tokio shell around the core, [`run`].
+//! - [`simulation`]: the simulated robot and [`VirtualRobot`](simulation::VirtualRobot): the same core on a virtual clock, faster than real
 //!   time, for tests and soak runs.
 
 pub mod base_driver;
 pub mod checkpoint;
 pub mod config;
+pub mod core;
 pub mod latency;
 pub mod live;
 pub mod notify;
+pub mod run_dir;
 pub mod runtime;
 pub mod sensor;
 pub mod simulation;

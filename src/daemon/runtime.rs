@@ -19,21 +19,22 @@ use lms200::pty::PtyEmulator;
 use serde::Serialize;
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
-use tokio::time::MissedTickBehavior;
-use tracing::{error, info, info_span, warn};
+use tracing::{error, info, warn};
 
 use super::base_driver::{BaseConnector, BaseDriver};
 use super::checkpoint::CheckpointFailed;
 use super::config::{BaseKind, DaemonConfig, SensorSource};
+pub use super::core::StopReason;
+use super::core::{Core, status_line};
 use super::latency::StageSummary;
 use super::live::{LiveMapper, LiveStatus};
 use super::notify::Notifier;
+use super::run_dir::RunDirs;
 use super::sensor::{ScanSlot, SensorOptions, SensorReport, SensorThread};
 use super::simulation::{emulated_sensor, simulated_robot};
 use crate::error_chain;
 use crate::geometry::Pose2;
 use crate::graph::OptimisationResult;
-use crate::input::lms200::range_scan;
 use crate::sim::SimRobot;
 
 /// Why the daemon could not start or finish.
@@ -71,20 +72,6 @@ pub enum DaemonError {
         #[source]
         source: crate::pipeline::PipelineError,
     },
-}
-
-/// Why the loop ended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-pub enum StopReason {
-    /// The shutdown future completed (SIGTERM, SIGINT, a test).
-    Shutdown,
-    /// Exploration completed and `exit_when_complete` is set.
-    ExplorationComplete,
-    /// `max_run_time` passed.
-    TimeLimit,
-    /// The sensor thread ended on its own (a bug): the map was saved and
-    /// the daemon exits with an error for systemd to restart it.
-    SensorThreadEnded,
 }
 
 /// What the loop reports after each scan (for live progress).
@@ -167,67 +154,6 @@ pub fn run_blocking(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary
         .build()
         .map_err(DaemonError::Runtime)?;
     runtime.block_on(run(config, hooks))
-}
-
-/// A name for a run's directory: `run-YYYYmmddTHHMMSSZ-<pid>` (UTC; the
-/// process id keeps names apart on a robot whose clock restarts at the
-/// same time after every boot).
-fn run_dir_name(prefix: &str) -> String {
-    let secs = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_secs())
-        .unwrap_or(0);
-    let (days, rem) = (secs / 86_400, secs % 86_400);
-    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
-    let z = days as i64 + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + i64::from(m <= 2);
-    format!(
-        "{prefix}-{y:04}{m:02}{d:02}T{:02}{:02}{:02}Z-{}",
-        rem / 3600,
-        rem % 3600 / 60,
-        rem % 60,
-        std::process::id()
-    )
-}
-
-/// A new directory below `parent`, never an existing one.
-fn new_dir(parent: &Path, prefix: &str) -> std::io::Result<PathBuf> {
-    std::fs::create_dir_all(parent)?;
-    let base = run_dir_name(prefix);
-    for k in 0..10_000 {
-        let dir = parent.join(if k == 0 {
-            base.clone()
-        } else {
-            format!("{base}-{k}")
-        });
-        match std::fs::create_dir(&dir) {
-            Ok(()) => return Ok(dir),
-            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
-            Err(e) => return Err(e),
-        }
-    }
-    Err(std::io::Error::new(
-        std::io::ErrorKind::AlreadyExists,
-        "every run directory name is taken",
-    ))
-}
-
-/// Fails early, before the sensor is touched, when `dir` cannot be
-/// written: a map that cannot be saved is worse than no start.
-fn check_writable(dir: &Path) -> Result<(), DaemonError> {
-    let fail = |source| DaemonError::OutputDir {
-        path: dir.to_owned(),
-        source,
-    };
-    std::fs::create_dir_all(dir).map_err(fail)?;
-    crate::durable::check_writable(dir).map_err(fail)
 }
 
 /// The mapper the run starts with: a new map, or `[map] load` in its mode.
@@ -360,390 +286,18 @@ fn replay_samples(
     Ok(samples)
 }
 
-fn status_line(s: &LiveStatus, rate: f64, sensor: &str) -> String {
-    let pose = s.pose.map_or_else(
-        || "no pose yet".to_string(),
-        |p| {
-            format!(
-                "pose ({:.2}, {:.2}, {:.0}°)",
-                p.x,
-                p.y,
-                p.theta.to_degrees()
-            )
-        },
-    );
-    let pose = match s.map_search {
-        Some(crate::pipeline::MapSearch::Finding(n)) => {
-            format!("localizing in the loaded map ({n} hypotheses)")
-        }
-        Some(crate::pipeline::MapSearch::Lost(n)) => {
-            format!("LOST in the loaded map ({n} hypotheses), {pose}")
-        }
-        None => pose,
-    };
-    let exploring = if s.exploration_complete {
-        ", exploration complete"
-    } else if s.exploring {
-        ", exploring"
-    } else {
-        ""
-    };
-    format!(
-        "{sensor} {rate:.1} scans/s, {} scans ({} localized), map {} walls {} frontiers {} loops, {} loop closures, {pose}{exploring}",
-        s.scans, s.localized, s.walls, s.frontiers, s.loops, s.loops_closed
-    )
-}
-
-fn tick_every(seconds: f64) -> tokio::time::Interval {
-    let period =
-        Duration::try_from_secs_f64(seconds.max(1e-3)).unwrap_or(Duration::from_secs(3600));
-    let mut i = tokio::time::interval(period);
-    i.set_missed_tick_behavior(MissedTickBehavior::Skip);
-    i
-}
-
-/// The loop's state.
-struct Daemon {
-    config: DaemonConfig,
-    t0: Instant,
-    live: LiveMapper,
-    base: BaseDriver,
-    notifier: Notifier,
-    robot: Option<SimRobot>,
-    mode: lms200::MeasuringMode,
-    /// The run's directory: given, or made at the first checkpoint.
-    out_dir: Option<PathBuf>,
-    state_dir: PathBuf,
-    last_seq: u64,
-    skipped: u64,
-    last_scan_at: Option<f64>,
-    first_scan_after: Option<f64>,
-    silence_logged: bool,
-    /// The sensor thread's last failure, for the status line.
-    sensor_trouble: Option<String>,
-    scans_at_last_status: u64,
-    last_status_t: f64,
-}
-
-impl Daemon {
-    fn clock(&self) -> f64 {
-        self.t0.elapsed().as_secs_f64()
-    }
-
-    fn sensor_ok(&self, now: f64) -> bool {
-        self.last_scan_at
-            .is_some_and(|t| now - t <= self.config.sensor.silence_stop)
-    }
-
-    fn on_scan(&mut self, slot: &ScanSlot, hook: &mut Option<ScanHook<'_>>) {
-        self.skipped += slot.seq.saturating_sub(self.last_seq + 1);
-        self.last_seq = slot.seq;
-        let now = self.clock();
-        self.base.poll(now, &mut self.live);
-        let t = slot
-            .scan
-            .timestamp
-            .saturating_duration_since(self.t0)
-            .as_secs_f64();
-        let Some(scan) = range_scan(&slot.scan.scan, t, self.mode) else {
-            return;
-        };
-        let queued = slot.scan.received_at.elapsed();
-        let outcome = self.live.on_scan(scan, Some(queued));
-        if self.first_scan_after.is_none() {
-            self.first_scan_after = Some(now);
-            info!(after_s = now, "first scan mapped; ready");
-            let _ = self.notifier.ready();
-        }
-        if self.silence_logged {
-            info!("scans are back");
-            self.silence_logged = false;
-        }
-        self.sensor_trouble = None;
-        self.last_scan_at = Some(now);
-        if let Some(hook) = hook.as_mut() {
-            hook(&ScanProgress {
-                t: now,
-                pose: outcome.pose,
-                truth: self.robot.as_ref().map(|r| r.true_pose_at(t)),
-                localized: outcome.localized,
-                status: self.live.status(),
-            });
-        }
-    }
-
-    /// Polls and commands the base; returns why to stop, if it is time.
-    fn on_base_tick(&mut self) -> Option<StopReason> {
-        let _span = info_span!("control").entered();
-        let now = self.clock();
-        self.notifier.loop_alive(Instant::now());
-        if self.first_scan_after.is_none()
-            && now >= self.config.daemon.ready_after
-            && self.notifier.ready()
-        {
-            warn!(
-                after_s = now,
-                "no scan yet: ready anyway, still waiting for the sensor"
-            );
-        }
-        self.base.poll(now, &mut self.live);
-        let sensor_ok = self.sensor_ok(now);
-        if !sensor_ok && self.last_scan_at.is_some() && !self.silence_logged {
-            warn!(
-                silent_s = self.config.sensor.silence_stop,
-                "no scan: the base stops until scans return"
-            );
-            self.silence_logged = true;
-        }
-        // A robot not (or no longer) found in a loaded map does not drive.
-        let placed = self.live.mapper().map_search().is_none();
-        self.base
-            .control(&mut self.live, sensor_ok && placed, now, None);
-        if self.config.exploration.exit_when_complete && self.live.exploration_complete() {
-            return Some(StopReason::ExplorationComplete);
-        }
-        let limit = self.config.daemon.max_run_time;
-        (limit > 0.0 && now >= limit).then_some(StopReason::TimeLimit)
-    }
-
-    fn on_status_tick(&mut self) {
-        let now = self.clock();
-        let status = self.live.status();
-        let rate = (status.scans - self.scans_at_last_status) as f64
-            / (now - self.last_status_t).max(1e-3);
-        self.scans_at_last_status = status.scans;
-        self.last_status_t = now;
-        let sensor = match (&self.sensor_trouble, self.sensor_ok(now)) {
-            (_, true) => "streaming".to_string(),
-            (Some(why), false) => format!("SENSOR FAILING ({why})"),
-            (None, false) if self.last_scan_at.is_none() => "waiting for the sensor".to_string(),
-            (None, false) => "SENSOR SILENT".to_string(),
-        };
-        let line = status_line(&status, rate, &sensor);
-        info!(skipped = self.skipped, "{line}");
-        let latency = self.live.latencies().line();
-        if !latency.is_empty() {
-            info!("latency µs p50/p99/max: {latency}");
-        }
-        self.notifier.status(&line);
-    }
-
-    /// The run's directory, made on first use (a run that never saw a scan
-    /// leaves no empty directory behind).
-    fn out_dir(&mut self) -> std::io::Result<PathBuf> {
-        if let Some(dir) = &self.out_dir {
-            return Ok(dir.clone());
-        }
-        let dir = new_dir(&self.state_dir, "run")?;
-        info!(dir = %dir.display(), "maps of this run are saved here");
-        self.out_dir = Some(dir.clone());
-        Ok(dir)
-    }
-
-    /// Starts writing a checkpoint on a blocking thread.
-    fn start_checkpoint(&mut self) -> Option<JoinHandle<Result<(), CheckpointFailed>>> {
-        if self.live.scans() == 0 {
-            return None;
-        }
-        let dir = match self.out_dir() {
-            Ok(dir) => dir,
-            Err(e) => {
-                error!("cannot make the run directory, the map stays in memory: {e}");
-                return None;
-            }
-        };
-        let checkpoint = self.live.begin_checkpoint(&dir);
-        Some(tokio::task::spawn_blocking(move || checkpoint.write()))
-    }
-
-    fn checkpoint_done(
-        &mut self,
-        result: Result<Result<(), CheckpointFailed>, tokio::task::JoinError>,
-    ) {
-        match result {
-            Ok(Ok(())) => {}
-            Ok(Err(failed)) => {
-                let e = self.live.checkpoint_failed(failed);
-                error!(
-                    "checkpoint failed, the map stays in memory: {}",
-                    error_chain(&e)
-                );
-            }
-            Err(e) => error!("the checkpoint writer failed: {e}"),
-        }
-    }
-
-    /// Takes in a background optimisation's result; a job whose thread
-    /// failed is abandoned, so the next one takes its loops in.
-    fn optimisation_done(&mut self, result: Result<OptimisationResult, tokio::task::JoinError>) {
-        match result {
-            Ok(result) => self.live.apply_optimisation(result),
-            Err(e) => {
-                error!("the loop-closure optimiser failed: {e}");
-                self.live.abandon_optimisation();
-            }
-        }
-    }
-
-    fn reload(&mut self, path: &Option<PathBuf>) {
-        let Some(path) = path else {
-            info!("reload asked for, but no configuration file to re-read");
-            return;
-        };
-        let new = match DaemonConfig::load(path) {
-            Ok(new) => new,
-            Err(e) => {
-                error!(
-                    path = %path.display(),
-                    "reload refused, the running configuration stays: {}",
-                    error_chain(&e)
-                );
-                return;
-            }
-        };
-        let old = &self.config;
-        let mut restart: Vec<String> = self
-            .live
-            .retune(new.mapper)
-            .iter()
-            .map(|k| format!("mapper.{k}"))
-            .collect();
-        let mut base_fixed = new.base.clone();
-        base_fixed.max_speed = old.base.max_speed;
-        base_fixed.max_turn_rate = old.base.max_turn_rate;
-        base_fixed.max_acceleration = old.base.max_acceleration;
-        base_fixed.max_angular_acceleration = old.base.max_angular_acceleration;
-        base_fixed.stale_odometry = old.base.stale_odometry;
-        for (name, changed) in [
-            ("sensor", new.sensor != old.sensor),
-            ("base", base_fixed != old.base),
-            ("sim", new.sim != old.sim),
-            ("daemon", new.daemon != old.daemon),
-        ] {
-            if changed {
-                restart.push(name.to_string());
-            }
-        }
-        self.base.retune(new.base.limits(), new.base.stale_odometry);
-        let exploration = new
-            .exploration
-            .enabled
-            .then_some((new.exploration.planner, new.exploration.drive));
-        let now = self.clock();
-        self.live.set_exploration(exploration, now);
-        if !new.exploration.enabled {
-            self.base.halt(now);
-        }
-        let config = &mut self.config;
-        config.mapper = new.mapper;
-        config.base.stale_odometry = new.base.stale_odometry;
-        config.base.max_speed = new.base.max_speed;
-        config.base.max_turn_rate = new.base.max_turn_rate;
-        config.base.max_acceleration = new.base.max_acceleration;
-        config.base.max_angular_acceleration = new.base.max_angular_acceleration;
-        config.exploration = new.exploration;
-        if restart.is_empty() {
-            info!(path = %path.display(), "configuration reloaded");
-        } else {
-            warn!(
-                path = %path.display(),
-                "configuration reloaded; these changes need a restart and are not applied: {}",
-                restart.join(", ")
-            );
-        }
-    }
-
-    fn on_report(&mut self, report: &SensorReport) {
-        if let SensorReport::Failed { error, .. } = report {
-            self.sensor_trouble = Some(error.clone());
-        }
-        log_report(report);
-    }
-
-    /// Saves the map into the run's directory; if that fails, into a
-    /// rescue directory beside it, then under the system's temporary
-    /// directory. Returns where it went and, if rescued, why.
-    fn save(&mut self) -> Result<(Option<PathBuf>, Option<String>), DaemonError> {
-        if self.live.scans() == 0 {
-            info!("no scan was mapped: nothing to save");
-            return Ok((None, None));
-        }
-        let first = match self.out_dir() {
-            Ok(dir) => match self.live.checkpoint(&dir) {
-                Ok(()) => return Ok((Some(dir), None)),
-                Err(e) => format!("{}: {}", dir.display(), error_chain(&e)),
-            },
-            Err(e) => format!("{}: {e}", self.state_dir.display()),
-        };
-        error!("cannot save the map in {first}");
-        let mut tried = vec![first.clone()];
-        // Beside the run's directory, then beside the state directory: not
-        // under $TMPDIR, which the unit's PrivateTmp= empties at stop.
-        let mut parents = vec![self.state_dir.clone()];
-        if let Some(up) = self
-            .state_dir
-            .parent()
-            .filter(|p| !p.as_os_str().is_empty())
-        {
-            parents.push(up.to_path_buf());
-        }
-        let earlier = self
-            .out_dir
-            .as_ref()
-            .map(|d| d.join(crate::pipeline::TRAJECTORY_FILE));
-        for parent in parents {
-            let rescue = match new_dir(&parent, "rescue") {
-                Ok(dir) => dir,
-                Err(e) => {
-                    tried.push(format!("{}: {e}", parent.display()));
-                    continue;
-                }
-            };
-            // The rescue is whole: the poses the run's directory holds
-            // already come first, then the ones not written yet.
-            let copied = match &earlier {
-                Some(path) if path.is_file() => {
-                    std::fs::copy(path, rescue.join(crate::pipeline::TRAJECTORY_FILE)).map(|_| ())
-                }
-                _ => Ok(()),
-            };
-            match copied
-                .map_err(|e| e.to_string())
-                .and_then(|()| self.live.checkpoint(&rescue).map_err(|e| error_chain(&e)))
-            {
-                Ok(()) => {
-                    error!(dir = %rescue.display(), "map saved to a rescue directory instead");
-                    return Ok((Some(rescue), Some(first)));
-                }
-                Err(e) => {
-                    tried.push(format!("{}: {e}", rescue.display()));
-                    // Nothing half-written is left behind.
-                    let _ = std::fs::remove_dir_all(&rescue);
-                }
-            }
-        }
-        Err(DaemonError::Save {
-            tried: tried.join("; "),
-        })
-    }
-}
-
 /// Runs the daemon until the shutdown future completes, exploration ends
 /// (with `exit_when_complete`) or the time limit passes; then stops the
 /// base and the sensor and saves the map.
+///
+/// This is the tokio shell around [`Core`]: it turns the sensor thread's
+/// mailbox, its reports, SIGHUP and the clock into `handle_*` calls, and
+/// what the core polls out into systemd notifications, checkpoints and
+/// optimisations on blocking threads.
 pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, DaemonError> {
     let t0 = Instant::now();
-    let state_dir = config.state_dir();
-    let out_dir = match &hooks.out_dir {
-        Some(dir) => {
-            check_writable(dir)?;
-            Some(dir.clone())
-        }
-        None => {
-            check_writable(&state_dir)?;
-            None
-        }
-    };
+    let clock = move || t0.elapsed().as_secs_f64();
+    let mut dirs = RunDirs::new(config.state_dir(), hooks.out_dir.clone())?;
     // The map first: a saved map that cannot be used stops the start
     // before the sensor and the base are touched.
     let exploration = config
@@ -755,13 +309,12 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     let mut live = start_map(&config, exploration)?;
     live.set_background_optimisation(true);
     let rig = build_rig(&config, t0)?;
-    let link = config.link();
     let (scan_tx, mut scan_rx) = watch::channel::<Option<ScanSlot>>(None);
     let (report_tx, mut report_rx) = mpsc::unbounded_channel();
     let sensor = SensorThread::spawn(
         SensorOptions {
             port: rig.sensor_port.clone(),
-            link: link.clone(),
+            link: config.link(),
             retry_initial: Duration::from_secs_f64(config.sensor.retry_initial),
             retry_max: Duration::from_secs_f64(config.sensor.retry_max),
             record: config.sensor.record.clone(),
@@ -771,40 +324,19 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     )
     .map_err(DaemonError::Thread)?;
     info!(port = %rig.sensor_port.display(), "sensor thread started");
-    let notifier = Notifier::from_env();
+    let mut notifier = Notifier::from_env();
     if let Some(w) = notifier.watchdog() {
         info!(interval_s = w.as_secs_f64(), "systemd watchdog enabled");
     }
-    let mut d = Daemon {
-        live,
-        base: BaseDriver::new(
-            rig.base,
-            config.base.limits(),
-            config.base.stale_odometry,
-            config.sensor.retry_initial,
-            config.sensor.retry_max,
-        ),
-        notifier,
-        robot: rig.robot.clone(),
-        mode: link.measuring_mode,
-        out_dir,
-        state_dir,
-        t0,
-        last_seq: 0,
-        skipped: 0,
-        last_scan_at: None,
-        first_scan_after: None,
-        silence_logged: false,
-        sensor_trouble: None,
-        scans_at_last_status: 0,
-        last_status_t: 0.0,
-        config,
-    };
-    let mut base_tick = tick_every(1.0 / d.config.base.rate);
-    let mut status_tick = tick_every(d.config.daemon.status_interval);
-    let checkpoints = d.config.daemon.checkpoint_interval > 0.0;
-    let mut checkpoint_tick = tick_every(d.config.daemon.checkpoint_interval.max(1.0));
-    checkpoint_tick.reset();
+    let base = BaseDriver::new(
+        rig.base,
+        config.base.limits(),
+        config.base.stale_odometry,
+        config.sensor.retry_initial,
+        config.sensor.retry_max,
+    );
+    let mut core = Core::new(config, live, base);
+    let mut last_seq = 0;
     let mut writing: Option<JoinHandle<Result<(), CheckpointFailed>>> = None;
     let mut optimising: Option<JoinHandle<OptimisationResult>> = None;
     let Hooks {
@@ -815,6 +347,7 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
         ..
     } = hooks;
     let reason = loop {
+        let wake = t0 + Duration::try_from_secs_f64(core.poll_timeout()).unwrap_or(Duration::MAX);
         tokio::select! {
             () = &mut shutdown_signal => break StopReason::Shutdown,
             Some(()) = async {
@@ -822,7 +355,7 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
                     Some(r) => r.recv().await,
                     None => std::future::pending().await,
                 }
-            } => d.reload(&config_path),
+            } => reload_config(&mut core, &config_path, clock()),
             changed = scan_rx.changed() => {
                 if changed.is_err() {
                     error!("the sensor thread ended; saving the map and stopping");
@@ -830,13 +363,21 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
                 }
                 let slot = scan_rx.borrow_and_update().clone();
                 if let Some(slot) = slot {
-                    d.on_scan(&slot, &mut on_scan);
-                }
-                if optimising.is_none() {
-                    optimising = d
-                        .live
-                        .take_optimisation()
-                        .map(|job| tokio::task::spawn_blocking(move || job.run()));
+                    core.handle_skipped(slot.seq.saturating_sub(last_seq + 1));
+                    last_seq = slot.seq;
+                    let now = clock();
+                    let t = slot.scan.timestamp.saturating_duration_since(t0).as_secs_f64();
+                    let queued = slot.scan.received_at.elapsed();
+                    let outcome = core.handle_scan(now, t, &slot.scan.scan, Some(queued));
+                    if let (Some(outcome), Some(hook)) = (outcome, on_scan.as_mut()) {
+                        hook(&ScanProgress {
+                            t: now,
+                            pose: outcome.pose,
+                            truth: rig.robot.as_ref().map(|r| r.true_pose_at(t)),
+                            localized: outcome.localized,
+                            status: core.status(),
+                        });
+                    }
                 }
             }
             result = async {
@@ -846,17 +387,15 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
                 }
             } => {
                 optimising = None;
-                d.optimisation_done(result);
-            }
-            Some(report) = report_rx.recv() => d.on_report(&report),
-            _ = base_tick.tick() => {
-                if let Some(reason) = d.on_base_tick() {
-                    break reason;
+                if let Err(e) = &result {
+                    error!("the loop-closure optimiser failed: {e}");
                 }
+                core.handle_optimisation_done(result.ok());
             }
-            _ = status_tick.tick() => d.on_status_tick(),
-            _ = checkpoint_tick.tick(), if checkpoints && writing.is_none() => {
-                writing = d.start_checkpoint();
+            Some(report) = report_rx.recv() => on_report(&mut core, &report),
+            () = tokio::time::sleep_until(wake.into()) => {
+                core.handle_tick(clock(), None);
+                notifier.loop_alive(Instant::now());
             }
             result = async {
                 match writing.as_mut() {
@@ -865,38 +404,57 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
                 }
             } => {
                 writing = None;
-                d.checkpoint_done(result);
+                checkpoint_done(&mut core, result);
             }
+        }
+        if core.poll_ready() {
+            notifier.ready();
+        }
+        if let Some(line) = core.poll_status() {
+            notifier.status(&line);
+        }
+        if core.poll_checkpoint() {
+            writing = start_checkpoint(&mut core, &mut dirs);
+        }
+        if optimising.is_none()
+            && let Some(job) = core.poll_optimisation()
+        {
+            optimising = Some(tokio::task::spawn_blocking(move || job.run()));
+        }
+        if let Some(reason) = core.poll_stop() {
+            break reason;
         }
     };
     info!(?reason, "stopping");
-    d.notifier.stopping();
-    let now = d.clock();
-    d.base.stop(now);
+    notifier.stopping();
+    core.stop_base(clock());
     // Stop streaming while the map is saved; closing the link (stop the
     // output, back to 9600 Bd) takes a moment and the save does not wait.
     sensor.request_stop();
     if let Some(task) = writing.take() {
         let result = task.await;
-        d.checkpoint_done(result);
+        checkpoint_done(&mut core, result);
     }
     if let Some(task) = optimising.take() {
         let result = task.await;
-        d.optimisation_done(result);
+        if let Err(e) = &result {
+            error!("the loop-closure optimiser failed: {e}");
+        }
+        core.handle_optimisation_done(result.ok());
     }
     // Loops that agreed with the graph but were not optimised yet are
     // taken in before the last save.
-    d.live.finish();
-    let saved = d.save();
+    core.finish();
+    let saved = dirs.save(&mut core);
     let joined = tokio::task::spawn_blocking(move || sensor.stop()).await;
     if joined.is_err() {
         warn!("the sensor thread did not stop cleanly");
     }
     while let Ok(report) = report_rx.try_recv() {
-        d.on_report(&report);
+        on_report(&mut core, &report);
     }
     let (out_dir, rescued_because) = saved?;
-    let status = d.live.status();
+    let status = core.status();
     info!("{}", status_line(&status, 0.0, "stopped:"));
     Ok(RunSummary {
         reason,
@@ -904,12 +462,72 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
         rescued_because,
         scans: status.scans,
         status,
-        scans_skipped: d.skipped,
-        odometry_refused: d.base.odometry_refused(),
-        latencies: d.live.latencies().summaries(),
-        first_scan_after: d.first_scan_after,
-        run_time: d.clock(),
+        scans_skipped: core.skipped(),
+        odometry_refused: core.base().odometry_refused(),
+        latencies: core.live().latencies().summaries(),
+        first_scan_after: core.first_scan_after(),
+        run_time: clock(),
     })
+}
+
+/// Starts writing a checkpoint on a blocking thread.
+fn start_checkpoint(
+    core: &mut Core,
+    dirs: &mut RunDirs,
+) -> Option<JoinHandle<Result<(), CheckpointFailed>>> {
+    let dir = match dirs.out_dir() {
+        Ok(dir) => dir,
+        Err(e) => {
+            error!("cannot make the run directory, the map stays in memory: {e}");
+            return None;
+        }
+    };
+    let checkpoint = core.begin_checkpoint(&dir);
+    Some(tokio::task::spawn_blocking(move || checkpoint.write()))
+}
+
+fn checkpoint_done(
+    core: &mut Core,
+    result: Result<Result<(), CheckpointFailed>, tokio::task::JoinError>,
+) {
+    match result {
+        Ok(written) => {
+            if let Err(e) = core.handle_checkpoint_done(written) {
+                error!(
+                    "checkpoint failed, the map stays in memory: {}",
+                    error_chain(&e)
+                );
+            }
+        }
+        Err(e) => {
+            error!("the checkpoint writer failed, its poses are lost: {e}");
+            core.handle_checkpoint_lost();
+        }
+    }
+}
+
+/// Re-reads the configuration (SIGHUP); a file that does not load is
+/// refused with the reason and the running configuration stays.
+fn reload_config(core: &mut Core, path: &Option<PathBuf>, now: f64) {
+    let Some(path) = path else {
+        info!("reload asked for, but no configuration file to re-read");
+        return;
+    };
+    match DaemonConfig::load(path) {
+        Ok(new) => core.handle_reload(new, now, path),
+        Err(e) => error!(
+            path = %path.display(),
+            "reload refused, the running configuration stays: {}",
+            error_chain(&e)
+        ),
+    }
+}
+
+fn on_report(core: &mut Core, report: &SensorReport) {
+    if let SensorReport::Failed { error, .. } = report {
+        core.handle_sensor_failure(error);
+    }
+    log_report(report);
 }
 
 fn log_report(report: &SensorReport) {
@@ -944,32 +562,5 @@ fn log_report(report: &SensorReport) {
             Event::Closed => info!("sensor link closed"),
             Event::Scan(_) => {}
         },
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::pipeline::MapSearch;
-
-    #[test]
-    fn the_status_line_says_where_the_robot_stands_in_a_loaded_map() {
-        let mut s = LiveStatus {
-            pose: Some(Pose2::new(1.0, 2.0, 0.0)),
-            ..LiveStatus::default()
-        };
-        assert!(status_line(&s, 37.5, "streaming").contains("pose (1.00, 2.00, 0°)"));
-        s.map_search = Some(MapSearch::Finding(3));
-        let line = status_line(&s, 37.5, "streaming");
-        assert!(
-            line.contains("localizing in the loaded map (3 hypotheses)"),
-            "{line}"
-        );
-        s.map_search = Some(MapSearch::Lost(0));
-        let line = status_line(&s, 37.5, "streaming");
-        assert!(
-            line.contains("LOST in the loaded map (0 hypotheses), pose"),
-            "{line}"
-        );
     }
 }

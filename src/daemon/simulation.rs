@@ -21,10 +21,10 @@ use lms200::virtual_line::VirtualLine;
 
 use super::base_driver::BaseDriver;
 use super::config::{DaemonConfig, SensorSource};
+use super::core::Core;
 use super::live::LiveMapper;
 use super::runtime::DaemonError;
 use crate::geometry::Pose2;
-use crate::input::lms200::range_scan;
 use crate::sim::world_file::WorldFile;
 use crate::sim::{LMS200_MAX_RANGE_CM_MODE, LMS200_MAX_RANGE_MM_MODE, SimRobot, WorldRangeSource};
 
@@ -110,12 +110,8 @@ pub struct VirtualRobot {
     line: VirtualLine,
     robot: SimRobot,
     world: WorldFile,
-    live: LiveMapper,
-    base: BaseDriver,
-    mode: lms200::MeasuringMode,
+    core: Core,
     tick: f64,
-    silence_stop: f64,
-    last_scan_at: Option<f64>,
     /// World pose at the first scan: the map frame.
     origin: Option<Pose2>,
     last_truth: Option<Pose2>,
@@ -142,33 +138,27 @@ impl VirtualRobot {
         let (robot, world) = simulated_robot(&config)?;
         let emulator = emulated_sensor(&config, &world, &robot, t0);
         let link = config.link();
-        let mode = link.measuring_mode;
         let exploration = config
             .exploration
             .enabled
             .then_some((config.exploration.planner, config.exploration.drive));
+        let mut live = super::runtime::start_map(&config, exploration)?;
+        live.set_background_optimisation(true);
+        let base = BaseDriver::new(
+            Some(BaseDriver::once(Box::new(robot.base()))),
+            config.base.limits(),
+            config.base.stale_odometry,
+            config.sensor.retry_initial,
+            config.sensor.retry_max,
+        );
         Ok(VirtualRobot {
             t0,
             now: 0.0,
             line: VirtualLine::new(link, emulator, t0),
-            live: {
-                let mut live = super::runtime::start_map(&config, exploration)?;
-                live.set_background_optimisation(true);
-                live
-            },
-            base: BaseDriver::new(
-                Some(BaseDriver::once(Box::new(robot.base()))),
-                config.base.limits(),
-                config.base.stale_odometry,
-                config.sensor.retry_initial,
-                config.sensor.retry_max,
-            ),
+            tick: 1.0 / config.base.rate,
+            core: Core::new(config, live, base),
             robot,
             world,
-            mode,
-            tick: 1.0 / config.base.rate,
-            silence_stop: config.sensor.silence_stop,
-            last_scan_at: None,
             origin: None,
             last_truth: None,
             error_sum: 0.0,
@@ -182,7 +172,12 @@ impl VirtualRobot {
     }
 
     pub fn live(&self) -> &LiveMapper {
-        &self.live
+        self.core.live()
+    }
+
+    /// The loop's core, as the tokio daemon runs it.
+    pub fn core(&self) -> &Core {
+        &self.core
     }
 
     pub fn robot(&self) -> &SimRobot {
@@ -213,8 +208,8 @@ impl VirtualRobot {
     }
 
     /// One control period: the line runs to the end of it, scans are
-    /// mapped, then the base is polled and commanded, as the daemon's
-    /// loop does.
+    /// mapped, then the core's timers run (the base is polled and
+    /// commanded), as the daemon's loop does.
     pub fn tick(&mut self) {
         self.tick_with(|_, _| None);
     }
@@ -233,17 +228,14 @@ impl VirtualRobot {
         });
         self.stats.link_events.extend(events);
         self.now = next;
-        self.base.poll(self.now, &mut self.live);
         for timed in scans {
             let t = timed
                 .timestamp
                 .saturating_duration_since(self.t0)
                 .as_secs_f64();
-            let Some(scan) = range_scan(&timed.scan, t, self.mode) else {
+            let Some(outcome) = self.core.handle_scan(self.now, t, &timed.scan, None) else {
                 continue;
             };
-            let outcome = self.live.on_scan(scan, None);
-            self.last_scan_at = Some(self.now);
             // Before the robot is found in a loaded map it has no pose.
             if outcome.rejection.as_deref() != Some(crate::pipeline::NOT_FOUND_YET) {
                 self.score(t, outcome.pose);
@@ -251,19 +243,18 @@ impl VirtualRobot {
             // The daemon runs the optimisation on a blocking thread and
             // takes the result in when it is done; here it is done at once,
             // so runs stay deterministic on the virtual clock.
-            if let Some(job) = self.live.take_optimisation() {
+            if let Some(job) = self.core.poll_optimisation() {
                 let result = job.run();
-                self.live.apply_optimisation(result);
+                self.core.handle_optimisation_done(Some(result));
             }
         }
-        let sensor_ok = self
-            .last_scan_at
-            .is_some_and(|t| self.now - t <= self.silence_stop);
-        let manual = drive(&self.live, self.now);
-        // A robot not (or no longer) found in a loaded map does not drive.
-        let placed = self.live.mapper().map_search().is_none();
-        self.base
-            .control(&mut self.live, sensor_ok && placed, self.now, manual);
+        let manual = drive(self.core.live(), self.now);
+        self.core.handle_tick(self.now, manual);
+        // Nothing here to tell (systemd) or to write (checkpoints are
+        // written when asked for, by `checkpoint`).
+        self.core.poll_ready();
+        self.core.poll_status();
+        self.core.poll_checkpoint();
     }
 
     fn score(&mut self, t: f64, estimate: Pose2) {
@@ -307,12 +298,12 @@ impl VirtualRobot {
     /// Writes a checkpoint of the map and trajectory into `dir`, as the
     /// daemon does every `checkpoint_interval`.
     pub fn checkpoint(&mut self, dir: &Path) -> Result<(), crate::pipeline::PipelineError> {
-        self.live.checkpoint(dir)
+        self.core.checkpoint(dir)
     }
 
     /// Stops the base (the robot coasts to a halt within its limits).
     pub fn stop_base(&mut self) {
-        self.base.stop(self.now);
+        self.core.stop_base(self.now);
         let _ = self.robot.base().stop(self.now);
     }
 }

@@ -1,0 +1,515 @@
+//! [`Core`]: the daemon's loop without the loop.
+//!
+//! Scans, odometry, sensor failures, reloads and the clock go in
+//! (`handle_*`); what the shell must do comes out (`poll_*`): tell systemd
+//! it is ready, publish a status line, write a checkpoint, run a
+//! loop-closure optimisation, stop. The core keeps the loop's timers (base
+//! control, status, checkpoints) and says when it next needs the clock
+//! ([`Core::poll_timeout`]); it never sleeps, spawns or opens a file. Its
+//! one port is the base adapter the shell hands it (a trait object: the
+//! simulated base, a replay, a line-protocol bridge), driven through
+//! [`BaseDriver`] with its limits and safety stops.
+//!
+//! Two shells drive the same core: the tokio loop of `clsmap run` and
+//! `clsmap demo` ([`super::runtime`]), at the sensor's real pace, and
+//! [`VirtualRobot`](super::simulation::VirtualRobot), on a virtual clock
+//! as fast as the CPU allows. Times are seconds since the run started.
+
+use std::time::Duration;
+
+use clsmap_base::Twist;
+use tracing::{info, info_span, warn};
+
+use super::base_driver::BaseDriver;
+use super::checkpoint::{Checkpoint, CheckpointFailed};
+use super::config::DaemonConfig;
+use super::live::{LiveMapper, LiveStatus};
+use crate::graph::{OptimisationJob, OptimisationResult};
+use crate::input::lms200::range_scan;
+use crate::pipeline::{MapSearch, PipelineError, ScanOutcome};
+
+/// Why the loop ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub enum StopReason {
+    /// The shutdown future completed (SIGTERM, SIGINT, a test).
+    Shutdown,
+    /// Exploration completed and `exit_when_complete` is set.
+    ExplorationComplete,
+    /// `max_run_time` passed.
+    TimeLimit,
+    /// The sensor thread ended on its own (a bug): the map was saved and
+    /// the daemon exits with an error for systemd to restart it.
+    SensorThreadEnded,
+}
+
+/// A periodic timer: due at `next`, then every `period` seconds; ticks
+/// missed while the loop was busy are skipped, not caught up.
+#[derive(Debug, Clone, Copy)]
+struct Timer {
+    next: f64,
+    period: f64,
+}
+
+impl Timer {
+    /// First due at `first` (s).
+    fn new(first: f64, period: f64) -> Timer {
+        Timer {
+            next: first,
+            period: period.max(1e-3),
+        }
+    }
+
+    /// Whether it is due at `now`; if so, moves on past `now`.
+    fn fire(&mut self, now: f64) -> bool {
+        if now < self.next {
+            return false;
+        }
+        while self.next <= now {
+            self.next += self.period;
+        }
+        true
+    }
+}
+
+/// The loop's timers, by what they start.
+#[derive(Debug, Clone, Copy)]
+struct Timers {
+    /// Poll the base, command it, check the stop conditions.
+    control: Timer,
+    /// The status line and `STATUS=`.
+    status: Timer,
+    /// A map checkpoint; `None` when `checkpoint_interval` is 0.
+    checkpoint: Option<Timer>,
+}
+
+/// The daemon's loop, sans-IO; see the module doc.
+#[derive(Debug)]
+pub struct Core {
+    config: DaemonConfig,
+    live: LiveMapper,
+    base: BaseDriver,
+    mode: lms200::MeasuringMode,
+    timers: Timers,
+    skipped: u64,
+    last_scan_at: Option<f64>,
+    first_scan_after: Option<f64>,
+    silence_logged: bool,
+    /// The sensor's last failure, for the status line.
+    sensor_trouble: Option<String>,
+    scans_at_last_status: u64,
+    last_status_t: f64,
+    ready_sent: bool,
+    ready_due: bool,
+    status_due: Option<String>,
+    checkpoint_due: bool,
+    checkpoint_in_flight: bool,
+    optimisation_in_flight: bool,
+    stop: Option<StopReason>,
+}
+
+impl Core {
+    /// The loop of `config` around `live` (a new or loaded map) and `base`.
+    pub fn new(config: DaemonConfig, live: LiveMapper, base: BaseDriver) -> Core {
+        let daemon = &config.daemon;
+        let timers = Timers {
+            control: Timer::new(0.0, 1.0 / config.base.rate),
+            status: Timer::new(0.0, daemon.status_interval),
+            checkpoint: (daemon.checkpoint_interval > 0.0).then(|| {
+                let every = daemon.checkpoint_interval.max(1.0);
+                Timer::new(every, every)
+            }),
+        };
+        Core {
+            mode: config.link().measuring_mode,
+            config,
+            live,
+            base,
+            timers,
+            skipped: 0,
+            last_scan_at: None,
+            first_scan_after: None,
+            silence_logged: false,
+            sensor_trouble: None,
+            scans_at_last_status: 0,
+            last_status_t: 0.0,
+            ready_sent: false,
+            ready_due: false,
+            status_due: None,
+            checkpoint_due: false,
+            checkpoint_in_flight: false,
+            optimisation_in_flight: false,
+            stop: None,
+        }
+    }
+
+    pub fn config(&self) -> &DaemonConfig {
+        &self.config
+    }
+
+    pub fn live(&self) -> &LiveMapper {
+        &self.live
+    }
+
+    pub fn base(&self) -> &BaseDriver {
+        &self.base
+    }
+
+    /// Scans replaced in the sensor's mailbox before the loop took them.
+    pub fn skipped(&self) -> u64 {
+        self.skipped
+    }
+
+    /// Seconds from the start to the first mapped scan.
+    pub fn first_scan_after(&self) -> Option<f64> {
+        self.first_scan_after
+    }
+
+    fn sensor_ok(&self, now: f64) -> bool {
+        self.last_scan_at
+            .is_some_and(|t| now - t <= self.config.sensor.silence_stop)
+    }
+
+    /// One scan taken from the sensor at `now`; `t` is the middle of its
+    /// sweep and `queued` the time since its last byte, when known. `None`
+    /// when the telegram holds no usable scan.
+    pub fn handle_scan(
+        &mut self,
+        now: f64,
+        t: f64,
+        scan: &lms200::Scan,
+        queued: Option<Duration>,
+    ) -> Option<ScanOutcome> {
+        self.base.poll(now, &mut self.live);
+        let scan = range_scan(scan, t, self.mode)?;
+        let outcome = self.live.on_scan(scan, queued);
+        if self.first_scan_after.is_none() {
+            self.first_scan_after = Some(now);
+            info!(after_s = now, "first scan mapped; ready");
+            self.ready();
+        }
+        if self.silence_logged {
+            info!("scans are back");
+            self.silence_logged = false;
+        }
+        self.sensor_trouble = None;
+        self.last_scan_at = Some(now);
+        Some(outcome)
+    }
+
+    /// `n` scans the sensor produced that the loop never saw.
+    pub fn handle_skipped(&mut self, n: u64) {
+        self.skipped += n;
+    }
+
+    /// The sensor could not be opened or its driver failed (it is tried
+    /// again); the status line says so until scans return.
+    pub fn handle_sensor_failure(&mut self, error: &str) {
+        self.sensor_trouble = Some(error.to_owned());
+    }
+
+    /// The clock at `now`: runs the timers that are due. `manual`, when
+    /// given, replaces the explorer's command for this control step (the
+    /// safety stops still apply).
+    pub fn handle_tick(&mut self, now: f64, manual: Option<Twist>) {
+        if self.timers.control.fire(now) {
+            self.control(now, manual);
+        }
+        if self.timers.status.fire(now) {
+            self.status_tick(now);
+        }
+        if let Some(timer) = self.timers.checkpoint.as_mut()
+            && timer.fire(now)
+            && !self.checkpoint_in_flight
+        {
+            self.checkpoint_due = true;
+        }
+    }
+
+    fn ready(&mut self) {
+        if !self.ready_sent {
+            self.ready_sent = true;
+            self.ready_due = true;
+        }
+    }
+
+    /// Polls and commands the base; notes why to stop, if it is time.
+    fn control(&mut self, now: f64, manual: Option<Twist>) {
+        let _span = info_span!("control").entered();
+        if self.first_scan_after.is_none()
+            && now >= self.config.daemon.ready_after
+            && !self.ready_sent
+        {
+            self.ready();
+            warn!(
+                after_s = now,
+                "no scan yet: ready anyway, still waiting for the sensor"
+            );
+        }
+        self.base.poll(now, &mut self.live);
+        let sensor_ok = self.sensor_ok(now);
+        if !sensor_ok && self.last_scan_at.is_some() && !self.silence_logged {
+            warn!(
+                silent_s = self.config.sensor.silence_stop,
+                "no scan: the base stops until scans return"
+            );
+            self.silence_logged = true;
+        }
+        // A robot not (or no longer) found in a loaded map does not drive.
+        let placed = self.live.mapper().map_search().is_none();
+        self.base
+            .control(&mut self.live, sensor_ok && placed, now, manual);
+        if self.stop.is_none() {
+            let limit = self.config.daemon.max_run_time;
+            self.stop =
+                if self.config.exploration.exit_when_complete && self.live.exploration_complete() {
+                    Some(StopReason::ExplorationComplete)
+                } else {
+                    (limit > 0.0 && now >= limit).then_some(StopReason::TimeLimit)
+                };
+        }
+    }
+
+    fn status_tick(&mut self, now: f64) {
+        let status = self.live.status();
+        let rate = (status.scans - self.scans_at_last_status) as f64
+            / (now - self.last_status_t).max(1e-3);
+        self.scans_at_last_status = status.scans;
+        self.last_status_t = now;
+        let sensor = match (&self.sensor_trouble, self.sensor_ok(now)) {
+            (_, true) => "streaming".to_string(),
+            (Some(why), false) => format!("SENSOR FAILING ({why})"),
+            (None, false) if self.last_scan_at.is_none() => "waiting for the sensor".to_string(),
+            (None, false) => "SENSOR SILENT".to_string(),
+        };
+        let line = status_line(&status, rate, &sensor);
+        info!(skipped = self.skipped, "{line}");
+        let latency = self.live.latencies().line();
+        if !latency.is_empty() {
+            info!("latency µs p50/p99/max: {latency}");
+        }
+        self.status_due = Some(line);
+    }
+
+    /// When (s) the core next needs [`handle_tick`](Self::handle_tick).
+    pub fn poll_timeout(&self) -> f64 {
+        let t = &self.timers;
+        let checkpoint = t.checkpoint.map_or(f64::INFINITY, |c| c.next);
+        t.control.next.min(t.status.next).min(checkpoint)
+    }
+
+    /// True once: time to tell systemd the daemon is ready (the first
+    /// scan, or `ready_after` without one).
+    pub fn poll_ready(&mut self) -> bool {
+        std::mem::take(&mut self.ready_due)
+    }
+
+    /// A status line to publish (`STATUS=`), every `status_interval`.
+    pub fn poll_status(&mut self) -> Option<String> {
+        self.status_due.take()
+    }
+
+    /// Why the loop should end, once it should.
+    pub fn poll_stop(&self) -> Option<StopReason> {
+        self.stop
+    }
+
+    /// Whether a checkpoint is due; the shell then picks the directory and
+    /// calls [`begin_checkpoint`](Self::begin_checkpoint). Nothing is due
+    /// before the first scan.
+    pub fn poll_checkpoint(&mut self) -> bool {
+        std::mem::take(&mut self.checkpoint_due) && self.live.scans() > 0
+    }
+
+    /// A snapshot to write into `dir`; its result goes to
+    /// [`handle_checkpoint_done`](Self::handle_checkpoint_done).
+    pub fn begin_checkpoint(&mut self, dir: &std::path::Path) -> Checkpoint {
+        self.checkpoint_in_flight = true;
+        self.live.begin_checkpoint(dir)
+    }
+
+    /// A checkpoint was written, or not (its poses are taken back and go
+    /// with the next one; the error is returned for the log).
+    pub fn handle_checkpoint_done(
+        &mut self,
+        result: Result<(), CheckpointFailed>,
+    ) -> Result<(), PipelineError> {
+        self.checkpoint_in_flight = false;
+        result.map_err(|failed| self.live.checkpoint_failed(failed))
+    }
+
+    /// A checkpoint's writer died (a panic): its poses are gone, the next
+    /// checkpoint goes ahead.
+    pub fn handle_checkpoint_lost(&mut self) {
+        self.checkpoint_in_flight = false;
+    }
+
+    /// A loop-closure optimisation to run off the loop, when one is ready
+    /// and none is running; its result goes to
+    /// [`handle_optimisation_done`](Self::handle_optimisation_done).
+    pub fn poll_optimisation(&mut self) -> Option<OptimisationJob> {
+        if self.optimisation_in_flight {
+            return None;
+        }
+        let job = self.live.take_optimisation()?;
+        self.optimisation_in_flight = true;
+        Some(job)
+    }
+
+    /// An optimisation's result, or `None` when its thread failed (the job
+    /// is abandoned, so the next one takes its loops in).
+    pub fn handle_optimisation_done(&mut self, result: Option<OptimisationResult>) {
+        self.optimisation_in_flight = false;
+        match result {
+            Some(result) => self.live.apply_optimisation(result),
+            None => self.live.abandon_optimisation(),
+        }
+    }
+
+    /// A reloaded configuration (SIGHUP): the tunables take effect, the
+    /// rest is named in a warning as needing a restart.
+    pub fn handle_reload(&mut self, new: DaemonConfig, now: f64, from: &std::path::Path) {
+        let old = &self.config;
+        let mut restart: Vec<String> = self
+            .live
+            .retune(new.mapper)
+            .iter()
+            .map(|k| format!("mapper.{k}"))
+            .collect();
+        let mut base_fixed = new.base.clone();
+        base_fixed.max_speed = old.base.max_speed;
+        base_fixed.max_turn_rate = old.base.max_turn_rate;
+        base_fixed.max_acceleration = old.base.max_acceleration;
+        base_fixed.max_angular_acceleration = old.base.max_angular_acceleration;
+        base_fixed.stale_odometry = old.base.stale_odometry;
+        for (name, changed) in [
+            ("sensor", new.sensor != old.sensor),
+            ("base", base_fixed != old.base),
+            ("sim", new.sim != old.sim),
+            ("daemon", new.daemon != old.daemon),
+        ] {
+            if changed {
+                restart.push(name.to_string());
+            }
+        }
+        self.base.retune(new.base.limits(), new.base.stale_odometry);
+        let exploration = new
+            .exploration
+            .enabled
+            .then_some((new.exploration.planner, new.exploration.drive));
+        self.live.set_exploration(exploration, now);
+        if !new.exploration.enabled {
+            self.base.halt(now);
+        }
+        let config = &mut self.config;
+        config.mapper = new.mapper;
+        config.base.stale_odometry = new.base.stale_odometry;
+        config.base.max_speed = new.base.max_speed;
+        config.base.max_turn_rate = new.base.max_turn_rate;
+        config.base.max_acceleration = new.base.max_acceleration;
+        config.base.max_angular_acceleration = new.base.max_angular_acceleration;
+        config.exploration = new.exploration;
+        if restart.is_empty() {
+            info!(path = %from.display(), "configuration reloaded");
+        } else {
+            warn!(
+                path = %from.display(),
+                "configuration reloaded; these changes need a restart and are not applied: {}",
+                restart.join(", ")
+            );
+        }
+    }
+
+    /// Stops the base for good at `now` (shutdown, or a test's stop).
+    pub fn stop_base(&mut self, now: f64) {
+        self.base.stop(now);
+    }
+
+    /// The end of a run: the last optimisation and rebuild, before the
+    /// last save.
+    pub fn finish(&mut self) {
+        self.live.finish();
+    }
+
+    /// Writes a checkpoint into `dir` now, on this thread (the last save,
+    /// a rescue, a test).
+    pub fn checkpoint(&mut self, dir: &std::path::Path) -> Result<(), PipelineError> {
+        self.live.checkpoint(dir)
+    }
+
+    pub fn status(&self) -> LiveStatus {
+        self.live.status()
+    }
+}
+
+/// The status line of the log and `STATUS=`.
+pub fn status_line(s: &LiveStatus, rate: f64, sensor: &str) -> String {
+    let pose = s.pose.map_or_else(
+        || "no pose yet".to_string(),
+        |p| {
+            format!(
+                "pose ({:.2}, {:.2}, {:.0}°)",
+                p.x,
+                p.y,
+                p.theta.to_degrees()
+            )
+        },
+    );
+    let pose = match s.map_search {
+        Some(MapSearch::Finding(n)) => {
+            format!("localizing in the loaded map ({n} hypotheses)")
+        }
+        Some(MapSearch::Lost(n)) => {
+            format!("LOST in the loaded map ({n} hypotheses), {pose}")
+        }
+        None => pose,
+    };
+    let exploring = if s.exploration_complete {
+        ", exploration complete"
+    } else if s.exploring {
+        ", exploring"
+    } else {
+        ""
+    };
+    format!(
+        "{sensor} {rate:.1} scans/s, {} scans ({} localized), map {} walls {} frontiers {} loops, {} loop closures, {pose}{exploring}",
+        s.scans, s.localized, s.walls, s.frontiers, s.loops, s.loops_closed
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Pose2;
+
+    #[test]
+    fn a_timer_skips_the_ticks_a_busy_loop_missed() {
+        let mut t = Timer::new(0.0, 0.1);
+        assert!(t.fire(0.0));
+        assert!(!t.fire(0.05));
+        assert!(t.fire(0.35));
+        // Due next at 0.4, not at 0.2 and 0.3 as well.
+        assert!(!t.fire(0.39));
+        assert!(t.fire(0.4));
+    }
+
+    #[test]
+    fn the_status_line_says_where_the_robot_stands_in_a_loaded_map() {
+        let mut s = LiveStatus {
+            pose: Some(Pose2::new(1.0, 2.0, 0.0)),
+            ..LiveStatus::default()
+        };
+        assert!(status_line(&s, 37.5, "streaming").contains("pose (1.00, 2.00, 0°)"));
+        s.map_search = Some(MapSearch::Finding(3));
+        let line = status_line(&s, 37.5, "streaming");
+        assert!(
+            line.contains("localizing in the loaded map (3 hypotheses)"),
+            "{line}"
+        );
+        s.map_search = Some(MapSearch::Lost(0));
+        let line = status_line(&s, 37.5, "streaming");
+        assert!(
+            line.contains("LOST in the loaded map (0 hypotheses), pose"),
+            "{line}"
+        );
+    }
+}
