@@ -6,8 +6,9 @@
 
 use std::hint::black_box;
 
+use clsmap::geometry::SegmentIndex;
 use clsmap::geometry::{CogLine, ExtractionConfig, Pose2, extract_lines};
-use clsmap::localize::{LocalizerConfig, SegmentIndex, localize};
+use clsmap::localize::{LocalizerConfig, localize};
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 

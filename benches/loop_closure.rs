@@ -16,15 +16,15 @@ use clsmap::geometry::Pose2;
 use clsmap::graph::{LoopQuery, close_loop};
 use clsmap::input::ScanRecord;
 use clsmap::localize::global::GlobalConfig;
-use clsmap::mapping_config::MapperConfig;
-use clsmap::pipeline::OfflineMapper;
+use clsmap::pipeline::Mapper;
+use clsmap::pipeline::config::MapperConfig;
 use clsmap::sim::{Rng, ScanSpec, Tour, World, cast_scan};
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 
 const KEYFRAMES: usize = 1000;
 
 /// The mapper after driving the long loop until it has `KEYFRAMES`.
-fn mapped_loop() -> OfflineMapper {
+fn mapped_loop() -> Mapper {
     let world = World::long_loop();
     let corners: [[f64; 2]; 4] = [[1.0, 1.0], [23.0, 1.0], [23.0, 17.0], [1.0, 17.0]];
     let mut waypoints = Vec::new();
@@ -43,7 +43,7 @@ fn mapped_loop() -> OfflineMapper {
     let mut config = MapperConfig::default();
     config.loop_closure.revisit_distance = 0.0;
     config.loop_closure.agreeing_loop_spacing = 1;
-    let mut mapper = OfflineMapper::new(config);
+    let mut mapper = Mapper::new(config);
     let (mut odo, mut prev) = (Pose2::new(-3.0, 5.0, 1.0), tour.pose_at(0.0));
     let mut t = 0.0;
     while mapper.keyframe_graph().len() < KEYFRAMES && t < tour.duration() {

@@ -13,8 +13,8 @@ use std::path::PathBuf;
 
 use clsmap::geometry::Pose2;
 use clsmap::input::{ScanRecord, open_log};
-use clsmap::mapping_config::MapperConfig;
-use clsmap::pipeline::OfflineMapper;
+use clsmap::pipeline::Mapper;
+use clsmap::pipeline::config::MapperConfig;
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 
@@ -60,7 +60,7 @@ fn bench_pipeline(c: &mut Criterion) {
     group.throughput(Throughput::Elements(records.len() as u64));
     group.bench_function(name, |b| {
         b.iter(|| {
-            let mut mapper = OfflineMapper::new(config);
+            let mut mapper = Mapper::new(config);
             for r in &records {
                 black_box(mapper.process(black_box(r)));
             }

@@ -14,8 +14,8 @@
 
 use clsmap::eval::{RelationErrors, evaluate, read_relations};
 use clsmap::input::{ScanRecord, open_log};
-use clsmap::mapping_config::MapperConfig;
-use clsmap::pipeline::OfflineMapper;
+use clsmap::pipeline::Mapper;
+use clsmap::pipeline::config::MapperConfig;
 use std::error::Error;
 use std::path::PathBuf;
 
@@ -63,7 +63,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         .iter()
         .filter_map(|r| Some((r.scan.t, r.odometry?)))
         .collect();
-    let mut mapper = OfflineMapper::new(config);
+    let mut mapper = Mapper::new(config);
     // As `clsmap map` runs it: the CLS map built once, at the end.
     mapper.defer_cls_rebuild();
     let t0 = records.first().map_or(0.0, |r| r.scan.t);
@@ -90,7 +90,7 @@ fn main() -> Result<(), Box<dyn Error>> {
                 dodo.x,
                 dodo.y,
                 dodo.theta.to_degrees(),
-                o.rejection.as_deref().unwrap_or("")
+                o.rejection.map_or("", |k| k.name())
             );
         }
         if let Some(odo) = r.odometry {

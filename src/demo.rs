@@ -227,7 +227,7 @@ pub fn run_demo(
     };
     let path = out_dir.join("demo.json");
     let text = serde_json::to_string_pretty(&result).map_err(io::Error::from);
-    text.and_then(|t| crate::durable::write_atomically(&path, (t + "\n").as_bytes()))
+    text.and_then(|t| crate::files::durable::write_atomically(&path, (t + "\n").as_bytes()))
         .map_err(|source| DemoError::Io { path, source })?;
     Ok(result)
 }

@@ -2,20 +2,20 @@
 //! (after Zhang & Ghosh, ICRA 2000) for holonomic robots.
 
 pub mod daemon;
+#[cfg(feature = "sim")]
 pub mod demo;
-pub mod durable;
 pub mod eval;
 pub mod explore;
+pub mod files;
 pub mod geometry;
 pub mod graph;
 pub mod input;
 pub mod localize;
 pub mod map;
-pub mod mapping_config;
 pub mod pipeline;
 pub mod render;
+#[cfg(feature = "sim")]
 pub mod sim;
-pub mod trajectory;
 
 /// An error and its causes on one line, outermost first: what failed and
 /// why, for a log line or a status report.

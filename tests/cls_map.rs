@@ -12,8 +12,9 @@ mod common;
 use clsmap::geometry::{ExtractionConfig, Pose2, extract_lines, scan_points};
 use clsmap::map::cls::{
     ClsError, ClsMap, ClsMapConfig, GridConfig, LocalMapConfig, SegmentMode, StoreError,
-    occupancy_grid, picture,
+    occupancy_grid,
 };
+use clsmap::render::picture;
 use clsmap::sim::{ROOM_WITH_BOXES_TOUR, Rng, ScanSpec, World, cast_scan};
 use common::{path, point_segment_distance};
 

@@ -72,7 +72,7 @@ fn explore_to_completion(world: &str) {
         left.len()
     );
     let svg = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("daemon-{world}.svg"));
-    std::fs::write(&svg, clsmap::map::cls::picture(map, None, None).to_svg()).unwrap();
+    std::fs::write(&svg, clsmap::render::picture(map, None, None).to_svg()).unwrap();
     println!("picture: {}", svg.display());
     assert!(done, "{world}: exploration did not complete");
     // Complete: every long frontier left was given up after its visits

@@ -19,7 +19,8 @@ use clsmap::explore::{
     plan_path,
 };
 use clsmap::geometry::{ExtractionConfig, Pose2, extract_lines};
-use clsmap::map::cls::{ClsLoop, ClsMap, ClsMapConfig, ClsSegment, ClsShape, SegmentMode, picture};
+use clsmap::map::cls::{ClsLoop, ClsMap, ClsMapConfig, ClsSegment, ClsShape, SegmentMode};
+use clsmap::render::picture;
 use clsmap::sim::{Rng, ScanSpec, World, WorldFile, cast_scan};
 use common::point_segment_distance;
 use proptest::prelude::*;

@@ -8,10 +8,11 @@
 #![allow(clippy::unwrap_used)]
 
 use clsmap::geometry::{
-    CogLine, ExtractionConfig, Pose2, RangeNoise, extract_lines, point_segment_distance, wrap_angle,
+    CogLine, ExtractionConfig, Pose2, RangeNoise, SegmentIndex, extract_lines,
+    point_segment_distance, wrap_angle,
 };
 use clsmap::localize::{
-    LineConstraints, LocalizationResult, LocalizeError, LocalizerConfig, SegmentIndex, localize,
+    LineConstraints, LocalizationResult, LocalizeError, LocalizerConfig, localize,
 };
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
 use proptest::prelude::*;

@@ -7,8 +7,8 @@
 
 use clsmap::geometry::{Pose2, wrap_angle};
 use clsmap::input::ScanRecord;
-use clsmap::mapping_config::MapperConfig;
-use clsmap::pipeline::{OfflineMapper, write_outputs};
+use clsmap::pipeline::config::MapperConfig;
+use clsmap::pipeline::{Mapper, write_outputs};
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
 
 mod common;
@@ -23,7 +23,7 @@ fn map_tour(
     odo: &[Pose2],
     config: MapperConfig,
     rng: &mut Rng,
-) -> (OfflineMapper, f64, f64) {
+) -> (Mapper, f64, f64) {
     let (mapper, rmse, worst, _) = map_tour_with(world, truth, odo, config, rng, None);
     (mapper, rmse, worst)
 }
@@ -38,9 +38,9 @@ fn map_tour_with(
     config: MapperConfig,
     rng: &mut Rng,
     latency: Option<usize>,
-) -> (OfflineMapper, f64, f64, usize) {
+) -> (Mapper, f64, f64, usize) {
     let spec = ScanSpec::lms200_half_degree(0.01);
-    let mut mapper = OfflineMapper::new(config);
+    let mut mapper = Mapper::new(config);
     mapper.set_background_optimisation(latency.is_some());
     let mut in_flight: Option<(usize, clsmap::graph::OptimisationJob)> = None;
     let mut applied = 0;

@@ -8,12 +8,12 @@
 #![allow(clippy::unwrap_used)]
 
 use clsmap::eval::{Relation, RelationErrors, evaluate, read_relations};
+use clsmap::files::trajectory::read_tum;
 use clsmap::geometry::Pose2;
 use clsmap::input::{ScanRecord, open_log};
-use clsmap::mapping_config::MapperConfig;
-use clsmap::pipeline::{MapRunOptions, OfflineMapper, Progress, run_offline_mapping};
+use clsmap::pipeline::config::MapperConfig;
+use clsmap::pipeline::{MapRunOptions, Mapper, Progress, run_offline_mapping};
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
-use clsmap::trajectory::read_tum;
 use std::path::PathBuf;
 
 mod common;
@@ -74,7 +74,7 @@ fn csail_first_200_scans_beat_odometry_on_the_relations() {
         .iter()
         .map(|r| (r.scan.t, r.odometry.unwrap()))
         .collect();
-    let mut mapper = OfflineMapper::new(MapperConfig::default());
+    let mut mapper = Mapper::new(MapperConfig::default());
     for r in &records {
         mapper.process(r);
     }
@@ -117,7 +117,7 @@ fn csail_whole_log_beats_published_scan_matching() {
     let config = MapperConfig::from_toml(&settings).unwrap();
     let (records, relations) = csail_head(&dir, usize::MAX);
     assert_eq!((records.len(), relations.len()), (1988, 1172));
-    let mut mapper = OfflineMapper::new(config);
+    let mut mapper = Mapper::new(config);
     for r in &records {
         mapper.process(r);
     }
@@ -162,7 +162,7 @@ fn thinned(records: Vec<ScanRecord>, travel: f64, turn: f64) -> Vec<ScanRecord> 
 fn csail_thinned_as_gmapping_keeps_scans_stays_consistent() {
     let Some(dir) = csail_dir() else { return };
     let overconfident = MapperConfig {
-        odometry: clsmap::mapping_config::OdometryNoise {
+        odometry: clsmap::pipeline::config::OdometryNoise {
             rotation_per_radian: 0.15,
             ..Default::default()
         },
@@ -175,7 +175,7 @@ fn csail_thinned_as_gmapping_keeps_scans_stays_consistent() {
     ] {
         let (records, relations) = csail_head(&dir, usize::MAX);
         let records = thinned(records, travel, turn);
-        let mut mapper = OfflineMapper::new(config);
+        let mut mapper = Mapper::new(config);
         mapper.defer_cls_rebuild();
         for r in &records {
             mapper.process(r);
@@ -202,7 +202,7 @@ fn simulated_loop_with_biased_odometry() {
     let truth = tour(&corners, 1, 0.1);
     // Odometry: the true increments, biased and noisy.
     let odo = drifting_odometry(&truth, 1.03, 0.0175, &mut rng);
-    let mut mapper = OfflineMapper::new(MapperConfig::default());
+    let mut mapper = Mapper::new(MapperConfig::default());
     for (k, (t, o)) in truth.iter().zip(&odo).enumerate() {
         let time = 100.0 + 0.2 * k as f64;
         let scan = cast_scan(&world, t, &spec, time, &mut rng);
@@ -374,7 +374,7 @@ fn malformed_input_is_reported_with_its_line() {
 fn a_saved_map_is_localized_in_and_extended() {
     let Some(dir) = csail_dir() else { return };
     let (records, _) = csail_head(&dir, 1000);
-    let mut first = OfflineMapper::new(MapperConfig::default());
+    let mut first = Mapper::new(MapperConfig::default());
     first.defer_cls_rebuild();
     for r in &records {
         first.process(r);
@@ -396,7 +396,7 @@ fn a_saved_map_is_localized_in_and_extended() {
         })
         .collect();
 
-    let mut again = OfflineMapper::from_map(
+    let mut again = Mapper::from_map(
         MapperConfig::default(),
         saved.clone(),
         clsmap::pipeline::MapMode::Localize,
@@ -445,7 +445,7 @@ fn a_saved_map_is_localized_in_and_extended() {
             odometry: r.odometry.map(|o| jump.compose(&o)),
         }))
         .collect();
-    let mut carried = OfflineMapper::from_map(
+    let mut carried = Mapper::from_map(
         MapperConfig::default(),
         saved.clone(),
         clsmap::pipeline::MapMode::Localize,
@@ -475,7 +475,7 @@ fn a_saved_map_is_localized_in_and_extended() {
     );
     assert!(worst < 0.3, "{worst}");
 
-    let mut extended = OfflineMapper::from_map(
+    let mut extended = Mapper::from_map(
         MapperConfig::default(),
         saved.clone(),
         clsmap::pipeline::MapMode::Extend,
@@ -498,6 +498,6 @@ fn a_saved_map_is_localized_in_and_extended() {
         .filter(|e| e.to == first_new && e.from < first_new)
         .collect();
     assert_eq!(into_old.len(), 1);
-    assert_eq!(into_old[0].kind, clsmap::graph::EdgeKind::Loop);
+    assert_eq!(into_old[0].kind, clsmap::map::EdgeKind::Loop);
     extended.cls_map().check_invariants().unwrap();
 }

@@ -5,10 +5,10 @@ use std::process::ExitCode;
 
 use anyhow::Context as _;
 use clsmap::eval::RelationErrors;
+use clsmap::files::trajectory::read_tum;
 use clsmap::map::cls::{self, ClsMap, ClsMapConfig, GridConfig};
-use clsmap::mapping_config::MapperConfig;
+use clsmap::pipeline::config::MapperConfig;
 use clsmap::pipeline::{self, Progress};
-use clsmap::trajectory::read_tum;
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Exit status of `map` when some input was skipped or the input broke
@@ -220,8 +220,8 @@ pub fn render(map: &Path, output: &Path, resolution: f64) -> anyhow::Result<Exit
             grid.height
         );
     } else {
-        let svg = cls::picture(&loaded, None, None).to_svg();
-        clsmap::durable::write_atomically(output, svg.as_bytes())
+        let svg = clsmap::render::picture(&loaded, None, None).to_svg();
+        clsmap::files::durable::write_atomically(output, svg.as_bytes())
             .with_context(|| format!("cannot write {}", output.display()))?;
         println!("wrote {}", output.display());
     }
@@ -233,7 +233,7 @@ pub fn mapper_config(path: Option<&Path>) -> anyhow::Result<MapperConfig> {
     let Some(path) = path else {
         return Ok(MapperConfig::default());
     };
-    let text = clsmap::durable::read_bounded(path, clsmap::durable::MAX_CONFIG_BYTES)
+    let text = clsmap::files::durable::read_bounded(path, clsmap::files::durable::MAX_CONFIG_BYTES)
         .with_context(|| format!("cannot read the configuration {}", path.display()))?;
     MapperConfig::from_toml(&text)
         .with_context(|| format!("invalid configuration {}", path.display()))

@@ -10,7 +10,10 @@ use anyhow::Context as _;
 use clap::{Parser, Subcommand, ValueEnum};
 
 mod daemon;
+#[cfg(feature = "sim")]
 mod demo;
+#[cfg(feature = "sim")]
+mod emulate;
 mod localize;
 mod mapping;
 mod sensor;
@@ -31,6 +34,7 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    #[cfg(feature = "sim")]
     /// The embedded default: the daemon on a simulated robot. An emulated
     /// LMS200 on a pseudo-terminal and a simulated holonomic base in a
     /// built-in floor plan; the loop localizes, maps and explores by
@@ -107,6 +111,7 @@ enum Command {
         #[arg(long, value_parser = parse_hex_u8)]
         mode: Option<u8>,
     },
+    #[cfg(feature = "sim")]
     /// Run an emulated LMS200 on a pseudo-terminal until Ctrl-C.
     Emulate {
         /// Create a symlink to the emulator's tty here (e.g. /tmp/lms200).
@@ -231,7 +236,10 @@ impl Cli {
     /// Whether the command draws live progress of its own (the demo): its
     /// log then shows warnings only, unless -v asks for more.
     pub fn shows_progress(&self) -> bool {
-        matches!(self.command, Command::Demo { .. })
+        #[cfg(feature = "sim")]
+        return matches!(self.command, Command::Demo { .. });
+        #[cfg(not(feature = "sim"))]
+        return false;
     }
 }
 
@@ -268,6 +276,7 @@ fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
 
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
+        #[cfg(feature = "sim")]
         Command::Demo { out, world, seed } => demo::demo(out.as_deref(), world.as_deref(), seed),
         Command::Run { config, map, mode } => daemon::run_daemon(&config, map, mode),
         Command::Probe { port } => sensor::probe(&port),
@@ -285,6 +294,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             format,
             mode,
         } => sensor::decode(&file, raw, format, mode),
+        #[cfg(feature = "sim")]
         Command::Emulate {
             link,
             start_baud,
@@ -292,10 +302,10 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             garbage,
             drops,
             seed,
-        } => sensor::emulate(
+        } => emulate::emulate(
             link.as_deref(),
             start_baud,
-            sensor::LineFaults {
+            emulate::LineFaults {
                 bit_flips,
                 garbage,
                 drops,

@@ -10,9 +10,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context as _, bail};
 use clsmap::input::lms200::{note_mode, scan_time_us, seconds};
 use lms200::driver::SerialDriver;
-use lms200::emulator::{Emulator, EmulatorConfig, FaultConfig};
 use lms200::link::{Event, LinkConfig};
-use lms200::pty::PtyEmulator;
 use lms200::recording::{Record, RecordingReader};
 use lms200::{Baud, DecodeEvent, Decoder, MeasuringMode, Reply, Scan, Units, Variant};
 use serde::Serialize;
@@ -368,69 +366,6 @@ fn units_name(u: Units) -> &'static str {
         Units::Mm => "mm",
         Units::Cm => "cm",
     }
-}
-
-/// Byte-level faults for `emulate`.
-#[derive(Debug, Clone, Copy)]
-pub struct LineFaults {
-    pub bit_flips: f64,
-    pub garbage: f64,
-    pub drops: f64,
-    pub seed: u64,
-}
-
-pub fn emulate(
-    link: Option<&Path>,
-    start_baud: Option<u32>,
-    faults: LineFaults,
-) -> anyhow::Result<ExitCode> {
-    for (name, p) in [
-        ("--bit-flips", faults.bit_flips),
-        ("--garbage", faults.garbage),
-        ("--drops", faults.drops),
-    ] {
-        if !(0.0..=1.0).contains(&p) {
-            bail!("{name} {p}: a probability per byte lies in [0, 1]");
-        }
-    }
-    let mut config = EmulatorConfig {
-        seed: faults.seed,
-        faults: FaultConfig {
-            bit_flip_per_byte: faults.bit_flips,
-            garbage_per_byte: faults.garbage,
-            drop_per_byte: faults.drops,
-            nak_every_nth_request: None,
-        },
-        ..EmulatorConfig::default()
-    };
-    if let Some(bps) = start_baud {
-        config.start_baud = Baud::from_bits_per_second(bps).with_context(|| {
-            format!("{bps} Bd: the LMS200 runs at 9600, 19200, 38400 or 500000")
-        })?;
-    }
-    let stop = super::stop_flag()?;
-    let pty = PtyEmulator::spawn(Emulator::new(config, Instant::now()), link)
-        .context("cannot start the emulator")?;
-    match link {
-        Some(l) => println!(
-            "LMS200 emulator on {} (link {})",
-            pty.tty_path().display(),
-            l.display()
-        ),
-        None => println!("LMS200 emulator on {}", pty.tty_path().display()),
-    }
-    println!(
-        "try: clsmap probe --port {}",
-        link.unwrap_or(pty.tty_path()).display()
-    );
-    std::io::stdout().flush()?;
-    while !stop.load(Ordering::SeqCst) {
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    let stats = pty.stats();
-    pty.stop().context("emulator failed")?;
-    eprintln!("emulator stopped: {stats:?}");
-    Ok(ExitCode::SUCCESS)
 }
 
 #[cfg(test)]

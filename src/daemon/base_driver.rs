@@ -293,7 +293,7 @@ mod tests {
     use clsmap_base::{BaseError, OdometrySample};
 
     use super::*;
-    use crate::mapping_config::MapperConfig;
+    use crate::pipeline::config::MapperConfig;
 
     /// A base that records what it is told and fails on request.
     struct Probe {

@@ -11,10 +11,10 @@
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
+use crate::files::trajectory::{StampedPose, TUM_HEADER, write_tum_lines};
 use crate::geometry::Pose2;
 use crate::map::MapContents;
 use crate::pipeline::{PipelineError, TRAJECTORY_FILE, create_output_dir, write_maps};
-use crate::trajectory::{StampedPose, TUM_HEADER, write_tum_lines};
 
 /// Everything one checkpoint writes.
 #[derive(Debug, Clone)]

@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::explore::{DriveConfig, ExplorationConfig};
 use crate::geometry::Pose2;
-use crate::mapping_config::{MapperConfig, line_of_key};
+use crate::pipeline::config::{MapperConfig, line_of_key};
 
 /// Everything the daemon needs.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -315,12 +315,12 @@ pub enum DaemonConfigError {
 impl DaemonConfig {
     /// Reads and checks a configuration file.
     pub fn load(path: &Path) -> Result<DaemonConfig, DaemonConfigError> {
-        let text = crate::durable::read_bounded(path, crate::durable::MAX_CONFIG_BYTES).map_err(
-            |source| DaemonConfigError::Read {
-                path: path.to_owned(),
-                source,
-            },
-        )?;
+        let text =
+            crate::files::durable::read_bounded(path, crate::files::durable::MAX_CONFIG_BYTES)
+                .map_err(|source| DaemonConfigError::Read {
+                    path: path.to_owned(),
+                    source,
+                })?;
         DaemonConfig::from_toml(&text)
     }
 
@@ -497,7 +497,7 @@ impl DaemonConfig {
         within("daemon.ready_after", d.ready_after, 0.0, 600.0)?;
         self.mapper.validate().map_err(|e| {
             let key = match &e {
-                crate::mapping_config::ConfigError::Range { key, .. } => mapper_key(key),
+                crate::pipeline::config::ConfigError::Range { key, .. } => mapper_key(key),
                 _ => "mapper".to_string(),
             };
             DaemonConfigError::Invalid {

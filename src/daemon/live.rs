@@ -17,12 +17,12 @@ use tracing::{info, info_span, warn};
 use super::checkpoint::{Checkpoint, CheckpointFailed};
 use super::latency::{Latencies, Stage};
 use crate::explore::{DriveConfig, ExplorationConfig, Explorer, ExplorerEvent, ExplorerStats};
+use crate::files::trajectory::StampedPose;
 use crate::geometry::{Pose2, RangeScan};
 use crate::input::ScanRecord;
 use crate::input::odometry::OdometryTrack;
-use crate::mapping_config::MapperConfig;
-use crate::pipeline::{OfflineMapper, PipelineError, ScanOutcome};
-use crate::trajectory::StampedPose;
+use crate::pipeline::config::MapperConfig;
+use crate::pipeline::{Mapper, PipelineError, ScanOutcome};
 
 /// How far (s) odometry is extrapolated past its newest sample to a scan's
 /// time: bases report at 10–50 Hz, so a scan often lies up to one period
@@ -59,7 +59,7 @@ pub struct LiveStatus {
 /// The mapper, the odometry buffer and the explorer of a running robot.
 #[derive(Debug)]
 pub struct LiveMapper {
-    mapper: OfflineMapper,
+    mapper: Mapper,
     odometry: OdometryTrack,
     explorer: Option<Explorer>,
     latencies: Latencies,
@@ -87,11 +87,11 @@ impl LiveMapper {
         exploration: Option<(ExplorationConfig, DriveConfig)>,
         now: f64,
     ) -> LiveMapper {
-        Self::with_mapper(OfflineMapper::new(mapper), exploration, now)
+        Self::with_mapper(Mapper::new(mapper), exploration, now)
     }
 
     /// A live mapper that goes on from a saved map (see
-    /// [`OfflineMapper::from_map`]).
+    /// [`Mapper::from_map`]).
     pub fn from_map(
         mapper: MapperConfig,
         contents: crate::map::MapContents,
@@ -99,20 +99,20 @@ impl LiveMapper {
         exploration: Option<(ExplorationConfig, DriveConfig)>,
         now: f64,
     ) -> Result<LiveMapper, crate::pipeline::PipelineError> {
-        let offline = OfflineMapper::from_map(mapper, contents, mode)?;
-        Ok(Self::with_mapper(offline, exploration, now))
+        let inner = Mapper::from_map(mapper, contents, mode)?;
+        Ok(Self::with_mapper(inner, exploration, now))
     }
 
     fn with_mapper(
-        mut offline: OfflineMapper,
+        mut inner: Mapper,
         exploration: Option<(ExplorationConfig, DriveConfig)>,
         now: f64,
     ) -> LiveMapper {
         // Samples come from a base polled live, each with its own time: an
         // unchanged pose is the robot standing still.
-        offline.trust_unchanged_odometry();
+        inner.trust_unchanged_odometry();
         LiveMapper {
-            mapper: offline,
+            mapper: inner,
             odometry: OdometryTrack::new(),
             explorer: exploration.map(|(planner, drive)| Explorer::new(planner, drive, now)),
             latencies: Latencies::new(),
@@ -129,26 +129,26 @@ impl LiveMapper {
         self.scans
     }
 
-    pub fn mapper(&self) -> &OfflineMapper {
+    pub fn mapper(&self) -> &Mapper {
         &self.mapper
     }
 
-    /// See [`OfflineMapper::set_background_optimisation`].
+    /// See [`Mapper::set_background_optimisation`].
     pub fn set_background_optimisation(&mut self, on: bool) {
         self.mapper.set_background_optimisation(on);
     }
 
-    /// See [`OfflineMapper::take_optimisation`].
+    /// See [`Mapper::take_optimisation`].
     pub fn take_optimisation(&mut self) -> Option<crate::graph::OptimisationJob> {
         self.mapper.take_optimisation()
     }
 
-    /// See [`OfflineMapper::abandon_optimisation`].
+    /// See [`Mapper::abandon_optimisation`].
     pub fn abandon_optimisation(&mut self) {
         self.mapper.abandon_optimisation();
     }
 
-    /// See [`OfflineMapper::apply_optimisation`].
+    /// See [`Mapper::apply_optimisation`].
     /// The live pose, the picture's path and the explorer's goal move with
     /// the map (by the newest keyframe's correction).
     pub fn apply_optimisation(&mut self, result: crate::graph::OptimisationResult) {
@@ -353,7 +353,7 @@ impl LiveMapper {
     }
 
     /// The end of a run: the mapper's last optimisation and rebuild (see
-    /// [`OfflineMapper::finish`]).
+    /// [`Mapper::finish`]).
     pub fn finish(&mut self) {
         self.mapper.finish();
     }

@@ -24,6 +24,7 @@ pub mod notify;
 pub mod run_dir;
 pub mod runtime;
 pub mod sensor;
+#[cfg(feature = "sim")]
 pub mod simulation;
 
 pub use config::{BaseKind, DaemonConfig, DaemonConfigError, SensorSource};

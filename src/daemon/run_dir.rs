@@ -50,7 +50,7 @@ fn check_writable(dir: &Path) -> Result<(), DaemonError> {
         source,
     };
     std::fs::create_dir_all(dir).map_err(fail)?;
-    crate::durable::check_writable(dir).map_err(fail)
+    crate::files::durable::check_writable(dir).map_err(fail)
 }
 
 /// The run's directory (given, or made on first use under the state

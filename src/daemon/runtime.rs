@@ -15,7 +15,6 @@ use std::time::{Duration, Instant};
 
 use clsmap_base::{BaseAdapter, LineBase, ReplayBase};
 use lms200::link::Event;
-use lms200::pty::PtyEmulator;
 use serde::Serialize;
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
@@ -23,7 +22,7 @@ use tracing::{error, info, warn};
 
 use super::base_driver::{BaseConnector, BaseDriver};
 use super::checkpoint::CheckpointFailed;
-use super::config::{BaseKind, DaemonConfig, SensorSource};
+use super::config::{BaseKind, DaemonConfig};
 pub use super::core::StopReason;
 use super::core::{Core, status_line};
 use super::latency::StageSummary;
@@ -31,11 +30,9 @@ use super::live::{LiveMapper, LiveStatus};
 use super::notify::Notifier;
 use super::run_dir::RunDirs;
 use super::sensor::{ScanSlot, SensorOptions, SensorReport, SensorThread};
-use super::simulation::{emulated_sensor, simulated_robot};
 use crate::error_chain;
 use crate::geometry::Pose2;
 use crate::graph::OptimisationResult;
-use crate::sim::SimRobot;
 
 /// Why the daemon could not start or finish.
 #[derive(Debug, thiserror::Error)]
@@ -46,12 +43,17 @@ pub enum DaemonError {
         #[source]
         source: std::io::Error,
     },
+    #[cfg(feature = "sim")]
     #[error("cannot load the simulated world {0:?}")]
     World(String, #[source] crate::sim::world_file::WorldFileError),
+    #[cfg(feature = "sim")]
     #[error("no built-in world is called {0:?} (built in: {1})")]
     UnknownWorld(String, String),
+    #[cfg(feature = "sim")]
     #[error("cannot start the emulated LMS200")]
     Emulator(#[from] lms200::pty::PtyError),
+    #[error("{0}; this clsmap was built without it (cargo feature `sim`)")]
+    NoSimulator(&'static str),
     #[error("cannot read the odometry to replay from {path}")]
     Replay {
         path: PathBuf,
@@ -208,28 +210,54 @@ pub(crate) fn start_map(
 /// Everything the loop owns besides the mapper.
 struct Rig {
     base: Option<BaseConnector>,
-    robot: Option<SimRobot>,
+    /// The simulated robot, to report where it truly was.
+    #[cfg(feature = "sim")]
+    robot: Option<crate::sim::SimRobot>,
     /// Keeps the emulator's pty open while the daemon runs.
-    _pty: Option<PtyEmulator>,
+    #[cfg(feature = "sim")]
+    _pty: Option<lms200::pty::PtyEmulator>,
     sensor_port: PathBuf,
 }
 
+impl Rig {
+    /// Where the simulated robot truly was at `t` (s), on a simulated rig.
+    fn truth(&self, t: f64) -> Option<Pose2> {
+        #[cfg(feature = "sim")]
+        return self.robot.as_ref().map(|r| r.true_pose_at(t));
+        #[cfg(not(feature = "sim"))]
+        return {
+            let _ = t;
+            None
+        };
+    }
+}
+
 fn build_rig(config: &DaemonConfig, t0: Instant) -> Result<Rig, DaemonError> {
-    let mut robot = None;
-    let mut pty = None;
+    #[cfg(feature = "sim")]
+    let (mut robot, mut pty) = (None, None);
+    #[cfg(not(feature = "sim"))]
+    let _ = t0;
+    #[allow(unused_mut)]
     let mut sensor_port = config.sensor.port.clone();
     let base: Option<BaseConnector> = match config.base.adapter {
+        #[cfg(feature = "sim")]
         BaseKind::Sim => {
-            let (sim, world) = simulated_robot(config)?;
-            if config.sensor.source == SensorSource::Emulator {
-                let emulator = emulated_sensor(config, &world, &sim, t0);
-                let p = PtyEmulator::spawn(emulator, None)?;
+            let (sim, world) = super::simulation::simulated_robot(config)?;
+            if config.sensor.source == super::config::SensorSource::Emulator {
+                let emulator = super::simulation::emulated_sensor(config, &world, &sim, t0);
+                let p = lms200::pty::PtyEmulator::spawn(emulator, None)?;
                 sensor_port = p.tty_path().to_owned();
                 pty = Some(p);
             }
             let base = sim.base();
             robot = Some(sim);
             Some(BaseDriver::once(Box::new(base)))
+        }
+        #[cfg(not(feature = "sim"))]
+        BaseKind::Sim => {
+            return Err(DaemonError::NoSimulator(
+                "[base] adapter = \"sim\" needs the simulator",
+            ));
         }
         // Connected by the loop, and again after a failure: a bridge that
         // starts after the daemon is picked up.
@@ -263,7 +291,9 @@ fn build_rig(config: &DaemonConfig, t0: Instant) -> Result<Rig, DaemonError> {
     };
     Ok(Rig {
         base,
+        #[cfg(feature = "sim")]
         robot,
+        #[cfg(feature = "sim")]
         _pty: pty,
         sensor_port,
     })
@@ -308,7 +338,7 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     // loop goes on localizing against the old map meanwhile.
     let mut live = start_map(&config, exploration)?;
     live.set_background_optimisation(true);
-    let rig = build_rig(&config, t0)?;
+    let mut rig = build_rig(&config, t0)?;
     let (scan_tx, mut scan_rx) = watch::channel::<Option<ScanSlot>>(None);
     let (report_tx, mut report_rx) = mpsc::unbounded_channel();
     let sensor = SensorThread::spawn(
@@ -329,7 +359,7 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
         info!(interval_s = w.as_secs_f64(), "systemd watchdog enabled");
     }
     let base = BaseDriver::new(
-        rig.base,
+        rig.base.take(),
         config.base.limits(),
         config.base.stale_odometry,
         config.sensor.retry_initial,
@@ -373,7 +403,7 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
                         hook(&ScanProgress {
                             t: now,
                             pose: outcome.pose,
-                            truth: rig.robot.as_ref().map(|r| r.true_pose_at(t)),
+                            truth: rig.truth(t),
                             localized: outcome.localized,
                             status: core.status(),
                         });

@@ -237,7 +237,7 @@ impl VirtualRobot {
                 continue;
             };
             // Before the robot is found in a loaded map it has no pose.
-            if outcome.rejection.as_deref() != Some(crate::pipeline::NOT_FOUND_YET) {
+            if outcome.rejection != Some(crate::pipeline::RejectionKind::NotFoundInTheMapYet) {
                 self.score(t, outcome.pose);
             }
             // The daemon runs the optimisation on a blocking thread and

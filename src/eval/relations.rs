@@ -11,8 +11,8 @@
 //! errors and, separately, of their squares; both are computed here.
 //! Because only relative motions enter, the trajectory's frame is free.
 
+use crate::files::trajectory::finite_numbers;
 use crate::geometry::{Pose2, wrap_angle};
-use crate::trajectory::finite_numbers;
 use serde::Serialize;
 use std::io::BufRead;
 use std::path::Path;

@@ -1,6 +1,8 @@
-//! Points, poses, COG lines and line extraction.
+//! Points, poses, COG lines, line extraction, and the paper's test of
+//! when two lines are one wall, over a spatial index of lines.
 
 pub mod cog_line;
+pub mod correspond;
 mod ends;
 pub mod extract;
 mod fit;
@@ -10,6 +12,9 @@ pub mod scan;
 mod split;
 
 pub use cog_line::{CogLine, WallEnds};
+pub use correspond::{
+    CorrespondenceConfig, SegmentId, SegmentIndex, lines_correspond, match_score,
+};
 pub use extract::{ExtractionConfig, LineExtractor, RangeNoise, extract_lines, scan_points};
 pub use pose::{Pose2, wrap_angle, wrap_angle_positive};
 pub use scan::{BeamFault, RangeScan};

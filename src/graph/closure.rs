@@ -26,11 +26,11 @@ use crate::geometry::{CogLine, Pose2, wrap_angle};
 use crate::localize::global::{GlobalConfig, GlobalMap, global_localize};
 use crate::localize::{LocalizerConfig, localize};
 use crate::map::cls::LocalRegion;
-use crate::map::{Keyframe, SegmentMap, SegmentMapConfig};
+use crate::map::{Edge, EdgeKind, Keyframe, SegmentMap, SegmentMapConfig};
 use nalgebra::{Matrix2, Matrix3};
 use serde::{Deserialize, Serialize};
 
-use super::{Edge, EdgeKind, OptimizerConfig};
+use super::OptimizerConfig;
 
 /// Tuning of loop closure; SI units.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -10,14 +10,13 @@ use serde::Serialize;
 use tracing::{debug, trace_span};
 
 use super::{
-    EdgeKind, GraphError, LoopClosureConfig, LoopQuery, LoopRejection, OptimizeReport, PoseGraph,
-    close_loop,
+    GraphError, LoopClosureConfig, LoopQuery, LoopRejection, OptimizeReport, PoseGraph, close_loop,
 };
 use crate::geometry::Pose2;
 use crate::localize::LocalizerConfig;
 use crate::localize::global::GlobalConfig;
 use crate::map::cls::{ClsMap, ClsMapConfig};
-use crate::map::{Keyframe, SegmentMap, SegmentMapConfig};
+use crate::map::{EdgeKind, Keyframe, SegmentMap, SegmentMapConfig};
 
 /// Loop-closure counters of a run.
 #[derive(Debug, Clone, PartialEq, Default, Serialize)]

@@ -32,6 +32,7 @@ pub use keyframes::{
 };
 
 use crate::geometry::{Pose2, wrap_angle};
+use crate::map::{Edge, EdgeKind};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use nalgebra_sparse::factorization::CscCholesky;
 use nalgebra_sparse::{CooMatrix, CscMatrix};
@@ -42,30 +43,6 @@ use thiserror::Error;
 /// Lower-triangle 3×3 blocks of a symmetric matrix over poses, keyed
 /// (row, column) with row ≥ column.
 type Blocks = BTreeMap<(usize, usize), Matrix3<f64>>;
-
-/// What an edge says and how far it is trusted.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum EdgeKind {
-    /// Between consecutive keyframes (scan matching, or odometry when the
-    /// keyframe was not localized).
-    Chain,
-    /// A verified loop closure: robust kernel applies.
-    Loop,
-}
-
-/// A relative-pose constraint: `measurement ≈ poses[from]⁻¹ ∘ poses[to]`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Edge {
-    pub from: usize,
-    pub to: usize,
-    /// Pose of `to` in the frame of `from` (m, rad).
-    pub measurement: Pose2,
-    /// Inverse covariance of the measurement's `(x, y, θ)` in the frame of
-    /// `from` (1/m², 1/(m·rad), 1/rad²).
-    pub information: Matrix3<f64>,
-    pub kind: EdgeKind,
-}
 
 /// Optimiser settings.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -16,8 +16,8 @@
 //! fix with the most matches wins. The result must still lie within the
 //! localizer's jump limits of the original prediction.
 
-use super::correspond::SegmentIndex;
 use super::local::{LocalizationResult, LocalizeError, LocalizerConfig, localize, rotation_limit};
+use crate::geometry::SegmentIndex;
 use crate::geometry::{CogLine, Pose2, wrap_angle};
 
 /// Rotations (rad) about `predicted`'s position that would bring

@@ -37,10 +37,10 @@
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::correspond::{CorrespondenceConfig, SegmentId, SegmentIndex};
 use super::problem::{Problem, Refined};
 use super::solve::{LineConstraints, SigmaFloors, weakest_translation};
 use crate::geometry::{CogLine, Pose2, wrap_angle};
+use crate::geometry::{CorrespondenceConfig, SegmentId, SegmentIndex};
 
 /// Tuning of local localization; SI units.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -4,10 +4,10 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::correspond::{CorrespondenceConfig, SegmentId, SegmentIndex};
 use super::local::{LocalizeError, LocalizerConfig};
 use super::solve::{LineConstraints, NormalEquations, SigmaFloors, weighted_circular_mean};
 use crate::geometry::{CogLine, Pose2, wrap_angle};
+use crate::geometry::{CorrespondenceConfig, SegmentId, SegmentIndex};
 
 /// Robust Gauss–Newton iterations that re-associate before the matches are
 /// validated and frozen.

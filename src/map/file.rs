@@ -36,9 +36,9 @@ use super::cls::store::{
     shapes_from_checked_records,
 };
 use super::cls::{ClsMap, ClsMapConfig, LocalEdge, LocalRegion, LocalSource};
+use super::{Edge, EdgeKind};
 use super::{Keyframe, MapSegment};
 use crate::geometry::{CogLine, Pose2};
-use crate::graph::{Edge, EdgeKind};
 
 /// The file's `format` tag.
 pub const FORMAT: &str = "clsmap-map";
@@ -337,14 +337,14 @@ pub fn encode(contents: &MapContents) -> Result<String, StoreError> {
 
 /// Writes `contents` to `path` atomically.
 pub fn save(path: &Path, contents: &MapContents) -> Result<(), StoreError> {
-    crate::durable::write_atomically_with(path, |out| write_file(out, contents))
+    crate::files::durable::write_atomically_with(path, |out| write_file(out, contents))
         .map_err(io_error_at(path))
 }
 
 /// Reads a map file of either version; a corrupt, truncated, foreign or
 /// inconsistent file is refused with the reason.
 pub fn load(path: &Path) -> Result<LoadedMap, StoreError> {
-    let text = crate::durable::read_bounded(path, crate::durable::MAX_MAP_BYTES)
+    let text = crate::files::durable::read_bounded(path, crate::files::durable::MAX_MAP_BYTES)
         .map_err(io_error_at(path))?;
     decode(&text)
 }
@@ -519,7 +519,6 @@ fn checked_contents(cls: ClsMap, payload: Payload) -> Result<MapContents, StoreE
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-    use crate::graph::diagonal_information;
     use crate::map::cls::loops::items;
     use crate::map::cls::{ClsLoop, ClsSegment, ClsShape};
 
@@ -567,7 +566,7 @@ mod tests {
         MapContents {
             cls: square(),
             walls: vec![MapSegment {
-                id: crate::localize::SegmentId(3),
+                id: crate::geometry::SegmentId(3),
                 observations: 2,
                 line: wall,
             }],
@@ -577,7 +576,10 @@ mod tests {
                 from: 0,
                 to: 1,
                 measurement: Pose2::new(0.5, 0.0, 0.1),
-                information: diagonal_information(0.01, 0.002),
+                // σ 1 cm and 2 mrad.
+                information: nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::new(
+                    1e4, 1e4, 2.5e5,
+                )),
                 kind: EdgeKind::Chain,
             }],
         }
@@ -601,7 +603,7 @@ mod tests {
         c.walls[0].line.xc = f64::NAN;
         assert!(encode(&c).is_err());
         let mut c = contents();
-        c.walls[0].id = crate::localize::SegmentId(4_000_000_000);
+        c.walls[0].id = crate::geometry::SegmentId(4_000_000_000);
         let text = encode(&c).unwrap();
         assert!(matches!(decode(&text), Err(StoreError::Inconsistent(_))));
     }

@@ -9,6 +9,7 @@
 
 use crate::geometry::{CogLine, Pose2, wrap_angle};
 use crate::map::cls::LocalRegion;
+use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 
 /// What a keyframe keeps of its scan: enough to rebuild the walls and the
@@ -95,6 +96,30 @@ impl KeyframePolicy {
         }
         due
     }
+}
+
+/// What an edge says and how far it is trusted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EdgeKind {
+    /// Between consecutive keyframes (scan matching, or odometry when the
+    /// keyframe was not localized).
+    Chain,
+    /// A verified loop closure: robust kernel applies.
+    Loop,
+}
+
+/// A relative-pose constraint: `measurement ≈ poses[from]⁻¹ ∘ poses[to]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Edge {
+    pub from: usize,
+    pub to: usize,
+    /// Pose of `to` in the frame of `from` (m, rad).
+    pub measurement: Pose2,
+    /// Inverse covariance of the measurement's `(x, y, θ)` in the frame of
+    /// `from` (1/m², 1/(m·rad), 1/rad²).
+    pub information: Matrix3<f64>,
+    pub kind: EdgeKind,
 }
 
 #[cfg(test)]

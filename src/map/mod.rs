@@ -7,5 +7,5 @@ pub mod keyframe;
 pub mod segment_map;
 
 pub use file::{LoadedMap, MapContents};
-pub use keyframe::{Keyframe, KeyframeConfig, KeyframePolicy};
+pub use keyframe::{Edge, EdgeKind, Keyframe, KeyframeConfig, KeyframePolicy};
 pub use segment_map::{MapSegment, SegmentMap, SegmentMapConfig, UpdateStats, blur_by_pose, fuse};

@@ -25,8 +25,10 @@
 //! were themselves derived from this map) do not make the map rigid beyond
 //! what those observations justify.
 
-use crate::geometry::{CogLine, Pose2, WallEnds, wrap_angle};
-use crate::localize::{CorrespondenceConfig, SegmentId, SegmentIndex, match_score};
+use crate::geometry::{
+    CogLine, CorrespondenceConfig, Pose2, SegmentId, SegmentIndex, WallEnds, match_score,
+    wrap_angle,
+};
 use serde::{Deserialize, Serialize};
 
 /// Tuning of the map update; SI units.

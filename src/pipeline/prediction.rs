@@ -15,7 +15,7 @@
 
 use crate::geometry::Pose2;
 use crate::input::OdometryTrack;
-use crate::mapping_config::OdometryNoise;
+use crate::pipeline::config::OdometryNoise;
 use nalgebra::Matrix3;
 
 /// Covariance of a pose (x, y, θ; m², m·rad, rad²).

@@ -8,7 +8,7 @@ use parry2d_f64::math::Vector;
 use parry2d_f64::partitioning::{Bvh, BvhNode};
 
 use crate::geometry::CogLine;
-use crate::localize::SegmentIndex;
+use crate::geometry::SegmentIndex;
 
 /// Map lines prepared for global localization (map frame).
 #[derive(Debug, Clone, Default)]

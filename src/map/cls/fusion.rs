@@ -13,7 +13,7 @@
 //! [`blur_by_pose`]: crate::map::blur_by_pose
 
 use crate::geometry::CogLine;
-use crate::localize::{CorrespondenceConfig, SegmentId, SegmentIndex};
+use crate::geometry::{CorrespondenceConfig, SegmentId, SegmentIndex};
 use crate::map::{SegmentMapConfig, fuse};
 
 use super::loops::{ClsSegment, line_between};

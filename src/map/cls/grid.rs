@@ -102,7 +102,7 @@ impl OccupancyGrid {
     pub fn write(&self, dir: &Path, stem: &str) -> Result<(), GridError> {
         let image = format!("{stem}.pgm");
         let write = |path: PathBuf, bytes: &[u8]| {
-            crate::durable::write_atomically(&path, bytes)
+            crate::files::durable::write_atomically(&path, bytes)
                 .map_err(|source| GridError::Io { path, source })
         };
         write(dir.join(&image), &self.to_pgm())?;

@@ -14,14 +14,12 @@
 //! - [`cls_map`]: [`ClsMap`] and its update.
 //! - [`store`]: versioned, checksummed, atomically written `map.json`.
 //! - [`grid`]: ROS map_server export (PGM + YAML).
-//! - [`mod@picture`]: SVG pictures.
 
 pub mod cls_map;
 mod fusion;
 pub mod grid;
 pub mod local;
 pub mod loops;
-pub mod picture;
 pub mod region;
 mod shapes;
 pub mod store;
@@ -35,6 +33,5 @@ pub use local::{
 pub use loops::{
     ClsLoop, ClsSegment, ClsShape, ClsmItem, InvariantError, SegmentMode, check_loops,
 };
-pub use picture::picture;
 pub use region::{EdgeOrigin, RegionConfig, RegionError};
 pub use store::StoreError;

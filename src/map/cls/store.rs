@@ -182,7 +182,7 @@ pub fn encode(items: &[ClsmItem]) -> Result<String, serde_json::Error> {
 /// version 2 wrote; kept so such files can be made for tests).
 pub fn save_items(path: &Path, items: &[ClsmItem]) -> Result<(), StoreError> {
     let text = encode(items).map_err(StoreError::Parse)?;
-    crate::durable::write_atomically(path, text.as_bytes()).map_err(io_error(path))
+    crate::files::durable::write_atomically(path, text.as_bytes()).map_err(io_error(path))
 }
 
 /// Parses and validates the contents of a version-1 map file.

@@ -24,7 +24,7 @@
 use std::collections::BTreeMap;
 
 use crate::geometry::CogLine;
-use crate::localize::{CorrespondenceConfig, lines_correspond};
+use crate::geometry::{CorrespondenceConfig, lines_correspond};
 
 use super::fusion::LineTable;
 use super::loops::{ClsLoop, ClsSegment, SegmentMode};

@@ -17,9 +17,10 @@
 //! [odometry]              # OdometryNoise
 //! ```
 
+use crate::geometry::CorrespondenceConfig;
 use crate::geometry::{ExtractionConfig, Pose2};
 use crate::graph::LoopClosureConfig;
-use crate::localize::{CorrespondenceConfig, LocalizerConfig};
+use crate::localize::LocalizerConfig;
 use crate::map::cls::{ClsMapConfig, RegionConfig};
 use crate::map::{KeyframeConfig, SegmentMapConfig};
 use serde::{Deserialize, Serialize};
@@ -653,7 +654,7 @@ mod documented_defaults {
     /// parse, and give exactly the defaults, so the two never drift apart.
     #[test]
     fn the_documented_config_is_the_default() {
-        let text = include_str!("../config/mapper.toml");
+        let text = include_str!("../../config/mapper.toml");
         let parsed = MapperConfig::from_toml(text).unwrap();
         assert_eq!(parsed, MapperConfig::default());
         // And it names every key: serialise the defaults and look for each.
@@ -701,7 +702,7 @@ mod documented_defaults {
 
     #[test]
     fn the_csail_config_parses() {
-        let text = include_str!("../config/csail.toml");
+        let text = include_str!("../../config/csail.toml");
         let cfg = MapperConfig::from_toml(text).unwrap();
         assert!(cfg.odometry_time_offset < 0.0);
     }

@@ -1,232 +1,29 @@
-//! The offline mapper: scans with odometry in, a trajectory, a map of
-//! actual segments (what localization matches against) and the Closed Line
-//! Segment map (the explored region, walls and frontiers) out.
-//!
-//! Per scan: the odometry increment since the previous scan predicts the
-//! pose (see [`MotionPredictor`] for frozen or missing odometry); lines are
-//! extracted; the pose is localized against the map (a failed or
-//! implausible fix is replaced by the prediction and counted); on
-//! keyframes the map is updated; the pose is recorded with the scan's own
-//! timestamp. The map frame is the robot pose at the first scan.
-//!
-//! The map learns only from poses worth trusting: localized ones, the
-//! first scan, and scans of unmapped space (too few matches) predicted
-//! from real odometry. A fix refused for any other reason, or a pose
-//! guessed at constant velocity, leaves the map alone: one wrongly placed
-//! wall misleads every later scan that sees it.
-//!
-//! Only this layer reads a clock (`Instant`, for the per-stage timing);
-//! the algorithms it calls take none, so runs are deterministic.
+//! [`Mapper`]: one scan at a time — predict, extract, localize, and on
+//! keyframes grow the maps and the keyframe graph. The offline run and
+//! the live daemon both feed it.
 
-use crate::eval::{EvalError, RelationErrors, evaluate_relations as evaluate_against};
-use crate::geometry::{CogLine, LineExtractor, Pose2, wrap_angle};
-use crate::graph::{
-    AppliedOptimisation, Correction, KeyframeGraph, LoopStats, OptimisationJob, OptimisationResult,
-};
-use crate::input::{InputError, ScanRecord, open_log};
-use crate::localize::global::GlobalConfig;
-use crate::localize::{
-    LocalizationResult, LocalizeError, SegmentIndex, localize, localize_searching_heading,
-};
-use crate::map::cls::{ClsError, ClsMap, local_region, picture};
-use crate::map::{Keyframe, KeyframePolicy, MapContents, SegmentMap};
-use crate::mapping_config::MapperConfig;
-use crate::render::SegmentStyle;
-use crate::trajectory::{StampedPose, TrajectoryError, write_tum};
+use std::time::Instant;
+
 use nalgebra::{Matrix3, Vector3};
-use serde::Serialize;
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
-use thiserror::Error;
-
-mod prediction;
-mod start;
-
-pub use prediction::{MotionPredictor, OdometryFeed, OdometryReading, Prediction};
-pub use start::{MapMode, StartSearch};
 use tracing::{debug, trace_span, warn};
 
-/// Name of the trajectory written by [`run_offline_mapping`].
-pub const TRAJECTORY_FILE: &str = "trajectory.tum";
-/// Name of the map written by [`run_offline_mapping`] (see
-/// [`crate::map::file`]).
-pub const MAP_FILE: &str = "map.json";
-/// Name of the map's picture written by [`run_offline_mapping`].
-pub const PICTURE_FILE: &str = "map.svg";
-
-#[derive(Debug, Error)]
-pub enum PipelineError {
-    #[error("cannot read the input")]
-    Input(#[from] InputError),
-    #[error("the input holds no scans")]
-    NoScans,
-    #[error("cannot write {}", path.display())]
-    Output {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    #[error("cannot encode the trajectory")]
-    Trajectory(#[from] TrajectoryError),
-    #[error("cannot encode the segment map")]
-    Json(#[from] serde_json::Error),
-    #[error("cannot save the map")]
-    Store(#[from] crate::map::cls::StoreError),
-    #[error("cannot start from the map: {0}")]
-    StartMap(String),
-}
-
-/// What happened to one scan.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ScanOutcome {
-    /// Robot pose in the map frame.
-    pub pose: Pose2,
-    /// Whether localization succeeded (else `pose` is the prediction).
-    pub localized: bool,
-    /// Whether the lines left a translation direction unobservable (the
-    /// prediction was kept along it).
-    pub degenerate: bool,
-    /// Whether the scan updated the map.
-    pub keyframe: bool,
-    /// Lines extracted from the scan.
-    pub lines: usize,
-    /// Lines matched to the map.
-    pub matches: usize,
-    /// Why localization was not used, if it was not (the kinds counted in
-    /// [`MappingSummary::rejections_by_kind`]).
-    pub rejection: Option<String>,
-    /// Whether the pose came from the previous scan's lines because the
-    /// map offered too few matches.
-    pub by_previous_scan: bool,
-}
-
-/// Accumulated wall-clock time of one stage.
-#[derive(Debug, Clone, Copy, Default)]
-struct StageClock {
-    total: Duration,
-    runs: usize,
-    /// Time in the last scan processed, if the stage ran in it.
-    last: Option<Duration>,
-}
-
-impl StageClock {
-    fn add(&mut self, d: Duration) {
-        self.total += d;
-        self.runs += 1;
-        self.last = Some(d);
-    }
-
-    fn mean_us(&self) -> f64 {
-        if self.runs == 0 {
-            0.0
-        } else {
-            self.total.as_secs_f64() * 1e6 / self.runs as f64
-        }
-    }
-}
-
-/// Mean time per run of each stage (µs).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
-pub struct StageTimes {
-    /// Odometry prediction, per scan.
-    pub predict_us: f64,
-    /// Line extraction, per scan.
-    pub extract_us: f64,
-    /// Localization, per scan that had a map to localize against.
-    pub localize_us: f64,
-    /// Segment map update, per keyframe.
-    pub map_update_us: f64,
-    /// CLS map update (local map, region union, fusion), per keyframe.
-    pub cls_update_us: f64,
-    /// Whole pipeline, per scan.
-    pub per_scan_us: f64,
-}
-
-/// Wall-clock time of each stage in the last scan processed; `None` for
-/// a stage that did not run in it (no map yet, not a keyframe).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct LastScanTimes {
-    pub predict: Option<Duration>,
-    pub extract: Option<Duration>,
-    pub localize: Option<Duration>,
-    pub map_update: Option<Duration>,
-    pub cls_update: Option<Duration>,
-    pub whole: Option<Duration>,
-}
-
-/// Summary of a mapping run.
-#[derive(Debug, Clone, PartialEq, Default, Serialize)]
-pub struct MappingSummary {
-    pub scans: usize,
-    pub keyframes: usize,
-    /// Segments in the final map.
-    pub segments: usize,
-    /// Actual and virtual segments and loops of the final CLS map.
-    pub cls_actual: usize,
-    pub cls_virtual: usize,
-    pub cls_loops: usize,
-    /// Scans whose lines left a direction unobservable (corridors).
-    pub degenerate_scans: usize,
-    /// Scans whose localization failed; the prediction was used.
-    pub rejected_localizations: usize,
-    /// The failures by kind (`TooFewMatches`, `ImplausibleJump`, ...).
-    pub rejections_by_kind: BTreeMap<String, usize>,
-    /// Where a recording broke off, when it did (the scans before were mapped).
-    pub input_broken: Option<String>,
-    /// Input items skipped (malformed lines, bad odometry samples, damaged
-    /// recording records, scans out of time order), and the first few.
-    pub skipped_input: usize,
-    pub skipped_examples: Vec<String>,
-    /// Scans whose odometry was not finite: mapped as scans without it.
-    pub scans_with_bad_odometry: usize,
-    /// Scans before the robot was found in a loaded map (no pose).
-    pub scans_before_start: usize,
-    /// Times the robot was found again in a loaded map after it was lost.
-    pub relocalizations: usize,
-    /// Keyframes whose CLS map update was refused (the map kept as it was).
-    pub cls_rejected: usize,
-    /// Scans that carried no odometry.
-    pub scans_without_odometry: usize,
-    /// Scans whose odometry equalled the previous scan's (standing still,
-    /// or odometry frozen); predicted at constant velocity.
-    pub scans_with_unchanged_odometry: usize,
-    /// Factor on the odometry's heading σ learnt at the end of the run
-    /// (1: the noise model fits; see `OdometryNoise::max_heading_scale`).
-    pub odometry_heading_scale: f64,
-    /// Scans localized from a searched heading because nothing matched
-    /// from the odometry's (see `LocalizerConfig::heading_search`).
-    pub heading_searches: usize,
-    /// Loop closure: searches, loops accepted and rejected, optimisations.
-    pub loops: LoopStats,
-    pub mean_time: StageTimes,
-}
-
-/// Why a scan's localization was not used.
-#[derive(Debug, Clone, PartialEq, Error)]
-enum Rejection {
-    #[error(transparent)]
-    Localize(LocalizeError),
-    #[error("correction of {sigmas:.1} σ from the odometry prediction")]
-    Inconsistent { sigmas: f64 },
-}
-
-impl Rejection {
-    /// Kind name, for the summary: the error variant's name, so kinds the
-    /// localizer adds later are counted without changes here.
-    fn kind(&self) -> String {
-        match self {
-            Rejection::Localize(e) => {
-                let debug = format!("{e:?}");
-                let end = debug
-                    .find(|c: char| !c.is_alphanumeric() && c != '_')
-                    .unwrap_or(debug.len());
-                debug[..end].to_owned()
-            }
-            Rejection::Inconsistent { .. } => "InconsistentWithOdometry".to_owned(),
-        }
-    }
-}
+use super::offline::SKIPPED_EXAMPLES;
+use super::prediction::{MotionPredictor, OdometryFeed, OdometryReading};
+use super::rejection::{Rejection, RejectionKind};
+use super::start::{MapMode, StartSearch};
+use super::summary::{LastScanTimes, MappingSummary, StageClocks};
+use super::{MapSearch, PipelineError, ScanOutcome};
+use crate::files::trajectory::StampedPose;
+use crate::geometry::{CogLine, LineExtractor, Pose2, SegmentIndex, wrap_angle};
+use crate::graph::{
+    AppliedOptimisation, Correction, KeyframeGraph, OptimisationJob, OptimisationResult,
+};
+use crate::input::ScanRecord;
+use crate::localize::global::GlobalConfig;
+use crate::localize::{LocalizationResult, LocalizeError, localize, localize_searching_heading};
+use crate::map::cls::{ClsError, ClsMap, local_region};
+use crate::map::{Keyframe, KeyframePolicy, MapContents, SegmentMap};
+use crate::pipeline::config::MapperConfig;
 
 /// Mahalanobis distance (in σ) of `pose` from `predicted` under the
 /// prediction covariance `cov` (x, y, θ); infinite if `cov` is singular.
@@ -245,7 +42,7 @@ fn mahalanobis(pose: &Pose2, predicted: &Pose2, cov: &[[f64; 3]; 3]) -> f64 {
 
 /// The mapper's state between scans.
 #[derive(Debug)]
-pub struct OfflineMapper {
+pub struct Mapper {
     config: MapperConfig,
     extractor: LineExtractor,
     lines: Vec<CogLine>,
@@ -265,7 +62,7 @@ pub struct OfflineMapper {
     /// after a loop closure.
     graph: KeyframeGraph,
     /// Whether a rebuild of the CLS map after a loop closure waits for
-    /// [`OfflineMapper::refresh_cls_map`] (offline runs, which need it
+    /// [`Mapper::refresh_cls_map`] (offline runs, which need it
     /// only at the end), and whether one is waiting.
     defer_cls_rebuild: bool,
     cls_stale: bool,
@@ -285,8 +82,8 @@ pub struct OfflineMapper {
     /// that runs once there are [`LOST_AFTER_SCANS`].
     lost_scans: usize,
     relocalizer: Option<StartSearch>,
-    summary: MappingSummary,
-    clocks: [StageClock; 6],
+    pub(super) summary: MappingSummary,
+    clocks: StageClocks,
 }
 
 /// Scans in a row without a fix against a loaded map after which the
@@ -297,16 +94,9 @@ const LOST_AFTER_SCANS: usize = 5;
 /// While lost, global localization runs on every this many scans.
 const RELOCALIZE_EVERY_SCANS: usize = 5;
 
-const PREDICT: usize = 0;
-const EXTRACT: usize = 1;
-const LOCALIZE: usize = 2;
-const MAP_UPDATE: usize = 3;
-const WHOLE: usize = 4;
-const CLS_UPDATE: usize = 5;
-
-impl OfflineMapper {
+impl Mapper {
     pub fn new(config: MapperConfig) -> Self {
-        OfflineMapper {
+        Mapper {
             config,
             extractor: LineExtractor::new(),
             lines: Vec::new(),
@@ -330,7 +120,7 @@ impl OfflineMapper {
             lost_scans: 0,
             relocalizer: None,
             summary: MappingSummary::default(),
-            clocks: [StageClock::default(); 6],
+            clocks: StageClocks::default(),
         }
     }
 
@@ -344,7 +134,7 @@ impl OfflineMapper {
         contents: MapContents,
         mode: MapMode,
     ) -> Result<Self, PipelineError> {
-        let mut mapper = OfflineMapper::new(config);
+        let mut mapper = Mapper::new(config);
         let walls: Vec<CogLine> = if contents.walls.is_empty() {
             contents.cls.actual_segments().map(|s| s.line).collect()
         } else {
@@ -473,14 +263,7 @@ impl OfflineMapper {
         s.cls_loops = self.cls.loops().count();
         s.loops = self.graph.stats().clone();
         s.odometry_heading_scale = self.predictor.heading_scale(&self.config.odometry);
-        s.mean_time = StageTimes {
-            predict_us: self.clocks[PREDICT].mean_us(),
-            extract_us: self.clocks[EXTRACT].mean_us(),
-            localize_us: self.clocks[LOCALIZE].mean_us(),
-            map_update_us: self.clocks[MAP_UPDATE].mean_us(),
-            cls_update_us: self.clocks[CLS_UPDATE].mean_us(),
-            per_scan_us: self.clocks[WHOLE].mean_us(),
-        };
+        s.mean_time = self.clocks.means();
         s
     }
 
@@ -542,14 +325,7 @@ impl OfflineMapper {
 
     /// How long each stage took in the last scan processed.
     pub fn last_scan_times(&self) -> LastScanTimes {
-        LastScanTimes {
-            predict: self.clocks[PREDICT].last,
-            extract: self.clocks[EXTRACT].last,
-            localize: self.clocks[LOCALIZE].last,
-            map_update: self.clocks[MAP_UPDATE].last,
-            cls_update: self.clocks[CLS_UPDATE].last,
-            whole: self.clocks[WHOLE].last,
-        }
+        self.clocks.last()
     }
 
     /// Localizes the current lines against the map; when the map offers
@@ -709,9 +485,7 @@ impl OfflineMapper {
     /// Processes one scan; returns what became of it.
     pub fn process(&mut self, record: &ScanRecord) -> ScanOutcome {
         let started = Instant::now();
-        for clock in &mut self.clocks {
-            clock.last = None;
-        }
+        self.clocks.start_scan();
         let _scan_span = trace_span!("scan", t = record.scan.t).entered();
         // A non-finite odometry pose would poison every prediction after
         // it: the scan is mapped as one without odometry.
@@ -752,7 +526,7 @@ impl OfflineMapper {
                         keyframe: false,
                         lines: self.lines.len(),
                         matches: 0,
-                        rejection: Some(NOT_FOUND_YET.to_owned()),
+                        rejection: Some(RejectionKind::NotFoundInTheMapYet),
                         by_previous_scan: false,
                     };
                 }
@@ -773,7 +547,7 @@ impl OfflineMapper {
             Some(found) => found,
             None => (prediction.pose, prediction.cov),
         };
-        self.clocks[PREDICT].add(t.elapsed());
+        self.clocks.predict.add(t.elapsed());
 
         let t = Instant::now();
         trace_span!("extract").in_scope(|| {
@@ -784,7 +558,7 @@ impl OfflineMapper {
                 &mut self.lines,
             )
         });
-        self.clocks[EXTRACT].add(t.elapsed());
+        self.clocks.extract.add(t.elapsed());
 
         let mut outcome = ScanOutcome {
             pose: predicted,
@@ -806,7 +580,7 @@ impl OfflineMapper {
             let t = Instant::now();
             let result = trace_span!("localize")
                 .in_scope(|| self.localize_with_fallback(predicted, &predicted_cov, &mut outcome));
-            self.clocks[LOCALIZE].add(t.elapsed());
+            self.clocks.localize.add(t.elapsed());
             self.previous_refused_jump = matches!(
                 result,
                 Err(Rejection::Localize(LocalizeError::ImplausibleJump { .. }))
@@ -840,7 +614,7 @@ impl OfflineMapper {
                     *self
                         .summary
                         .rejections_by_kind
-                        .entry(kind.clone())
+                        .entry(kind.name().to_owned())
                         .or_default() += 1;
                     // Per scan at debug level (hundreds per long log);
                     // the totals are warned about once at the end.
@@ -902,7 +676,7 @@ impl OfflineMapper {
             let t = Instant::now();
             trace_span!("map_update")
                 .in_scope(|| self.map.update(&self.lines, &outcome.pose, &cov));
-            self.clocks[MAP_UPDATE].add(t.elapsed());
+            self.clocks.map_update.add(t.elapsed());
             let t = Instant::now();
             let region = local_region(&self.lines, &record.scan, &self.cls.config().local);
             // A map waiting for its rebuild is not grown: the rebuild
@@ -918,7 +692,7 @@ impl OfflineMapper {
                     debug!(t = record.scan.t, "CLS map update refused: {e}");
                 }
             }
-            self.clocks[CLS_UPDATE].add(t.elapsed());
+            self.clocks.cls_update.add(t.elapsed());
             // Keyframes are kept for loop closure and for a deferred CLS
             // map; a live mapper without loop closure needs neither, and
             // would only grow.
@@ -1003,196 +777,9 @@ impl OfflineMapper {
         self.anchors
             .push(anchor.map(|k| (k, self.graph.poses()[k].between(&outcome.pose))));
         self.summary.scans += 1;
-        self.clocks[WHOLE].add(started.elapsed());
+        self.clocks.whole.add(started.elapsed());
         outcome
     }
-}
-
-/// Progress of [`run_offline_mapping`], reported after every scan.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Progress {
-    pub scans: usize,
-    /// Bytes of the input consumed so far.
-    pub bytes_read: u64,
-    /// Size of the input (bytes).
-    pub bytes_total: u64,
-}
-
-fn write_file(path: &Path, bytes: &[u8]) -> Result<(), PipelineError> {
-    crate::durable::write_atomically(path, bytes).map_err(|source| PipelineError::Output {
-        path: path.to_owned(),
-        source,
-    })
-}
-
-/// Writes what a mapper built into `out_dir` (created if needed), each
-/// file atomically: the trajectory ([`TRAJECTORY_FILE`]), the map
-/// ([`MAP_FILE`]: CLS map, walls, keyframes, pose graph) and its picture
-/// with the trajectory ([`PICTURE_FILE`]).
-pub fn write_outputs(
-    out_dir: &Path,
-    mapper: &OfflineMapper,
-    draw_loops: bool,
-) -> Result<(), PipelineError> {
-    create_output_dir(out_dir)?;
-    let mut tum = Vec::new();
-    write_tum(&mut tum, mapper.trajectory())?;
-    write_file(&out_dir.join(TRAJECTORY_FILE), &tum)?;
-    let poses: Vec<Pose2> = mapper.trajectory().iter().map(|(_, p)| *p).collect();
-    let loops = if draw_loops {
-        mapper.loop_edges()
-    } else {
-        Vec::new()
-    };
-    write_maps(out_dir, &mapper.contents(), &poses, &loops)
-}
-
-/// Creates `out_dir` and its parents if needed.
-pub fn create_output_dir(out_dir: &Path) -> Result<(), PipelineError> {
-    std::fs::create_dir_all(out_dir).map_err(|source| PipelineError::Output {
-        path: out_dir.to_owned(),
-        source,
-    })
-}
-
-/// Writes the map into `out_dir`, each file atomically: [`MAP_FILE`]
-/// (see [`crate::map::file`]) and its picture ([`PICTURE_FILE`]) with
-/// `path` (and the loop closures `loops`, each from one keyframe position
-/// to another) drawn on it.
-pub fn write_maps(
-    out_dir: &Path,
-    contents: &MapContents,
-    path: &[Pose2],
-    loops: &[[[f64; 2]; 2]],
-) -> Result<(), PipelineError> {
-    crate::map::file::save(&out_dir.join(MAP_FILE), contents)?;
-    let mut pic = picture(&contents.cls, Some(path), path.last().copied());
-    for [a, b] in loops {
-        pic.segment(*a, *b, SegmentStyle::LoopEdge);
-    }
-    write_file(&out_dir.join(PICTURE_FILE), pic.to_svg().as_bytes())
-}
-
-/// How [`run_offline_mapping`] runs.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct MapRunOptions<'a> {
-    /// Draw the accepted loop closures on the picture.
-    pub draw_loops: bool,
-    /// Stop at the first input item that cannot be used.
-    pub strict: bool,
-    /// Go on from a saved map, localizing in it or extending it, instead
-    /// of starting a new one.
-    pub start_from: Option<(&'a Path, MapMode)>,
-}
-
-/// A search for the robot in a loaded map, with its hypotheses so far.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-pub enum MapSearch {
-    /// Not found yet since the start.
-    Finding(usize),
-    /// Lost after being found; being looked for again.
-    Lost(usize),
-}
-
-/// [`ScanOutcome::rejection`] of a scan before the robot was found in a
-/// loaded map.
-pub const NOT_FOUND_YET: &str = "NotFoundInTheMapYet";
-
-/// How many skipped input items are named one by one (the rest counted).
-pub const SKIPPED_EXAMPLES: usize = 5;
-
-/// Maps a log file offline and writes its outputs (see [`write_outputs`])
-/// into `out_dir` (created if needed). Input items that cannot be used (a
-/// malformed line, a bad odometry sample, a damaged recording record, a
-/// scan out of time order) are skipped, counted and the first few named
-/// (see [`crate::input`]); with `strict` the first one ends the run with
-/// its error and nothing is written. A recording cut short (a killed
-/// recorder, a power loss) is mapped up to the break; the summary says
-/// where it broke.
-pub fn run_offline_mapping(
-    input: &Path,
-    out_dir: &Path,
-    config: &MapperConfig,
-    options: &MapRunOptions<'_>,
-    progress: &mut dyn FnMut(Progress),
-) -> Result<MappingSummary, PipelineError> {
-    let MapRunOptions {
-        draw_loops,
-        strict,
-        start_from,
-    } = *options;
-    let mut mapper = match start_from {
-        Some((map, mode)) => {
-            let loaded = crate::map::file::load(map)?;
-            OfflineMapper::from_map(*config, loaded.contents, mode)?
-        }
-        None => OfflineMapper::new(*config),
-    };
-    let mut log = open_log(input)?;
-    mapper.defer_cls_rebuild();
-    let mut input_broken = None;
-    let (mut skipped, mut examples) = (0, Vec::new());
-    while let Some(record) = log.next() {
-        let record = match record {
-            Ok(r) => r,
-            Err(e) if e.is_skipped_item() && !strict => {
-                skipped += 1;
-                if examples.len() < SKIPPED_EXAMPLES {
-                    warn!("skipped: {e}");
-                    examples.push(e.to_string());
-                }
-                continue;
-            }
-            Err(InputError::Recording(e)) if !strict => {
-                warn!("{e}: mapping the scans before the break");
-                input_broken = Some(e.to_string());
-                break;
-            }
-            Err(e) => return Err(e.into()),
-        };
-        mapper.process(&record);
-        progress(Progress {
-            scans: mapper.summary.scans,
-            bytes_read: log.bytes_read(),
-            bytes_total: log.size(),
-        });
-    }
-    if mapper.trajectory().is_empty() {
-        if mapper.summary.scans_before_start > 0 {
-            return Err(PipelineError::StartMap(format!(
-                "the robot was not found in the map in any of the {} scans",
-                mapper.summary.scans_before_start
-            )));
-        }
-        return Err(PipelineError::NoScans);
-    }
-    mapper.finish();
-    let mut summary = mapper.summary();
-    summary.input_broken = input_broken;
-    summary.skipped_input = skipped;
-    summary.skipped_examples = examples;
-    if skipped > SKIPPED_EXAMPLES {
-        warn!("{skipped} input items skipped in all");
-    }
-    if summary.rejected_localizations > 0 {
-        warn!(
-            rejected = summary.rejected_localizations,
-            scans = summary.scans,
-            by_kind = ?summary.rejections_by_kind,
-            "localization failed on some scans; their odometry prediction was used"
-        );
-    }
-    write_outputs(out_dir, &mapper, draw_loops)?;
-    Ok(summary)
-}
-
-/// The relation metric of a trajectory against a relations file; see
-/// [`crate::eval`].
-pub fn evaluate_relations(
-    trajectory: &[StampedPose],
-    relations_path: &Path,
-) -> Result<RelationErrors, EvalError> {
-    evaluate_against(trajectory, relations_path)
 }
 
 #[cfg(test)]
@@ -1209,7 +796,7 @@ mod tests {
         let mut rng = Rng::new(1);
         let odo = Pose2::new(1.0, 1.0, 0.3);
         let scan: RangeScan = cast_scan(&world, &odo, &spec, 0.0, &mut rng);
-        let mut mapper = OfflineMapper::new(MapperConfig::default());
+        let mut mapper = Mapper::new(MapperConfig::default());
         let out = mapper.process(&ScanRecord {
             scan,
             odometry: Some(odo),
@@ -1228,7 +815,7 @@ mod tests {
         let world = World::room_with_boxes();
         let spec = ScanSpec::lms200_half_degree(0.0);
         let mut rng = Rng::new(4);
-        let mut mapper = OfflineMapper::new(MapperConfig::default());
+        let mut mapper = Mapper::new(MapperConfig::default());
         let mut feed = |k: usize, truth: Pose2, odometry: Pose2| {
             let scan = cast_scan(&world, &truth, &spec, 0.2 * k as f64, &mut rng);
             mapper.process(&ScanRecord {
@@ -1247,7 +834,7 @@ mod tests {
         let truth = start.compose(&moved);
         let first = feed(2, truth, Pose2::new(0.02, 0.0, 0.4));
         assert_eq!(
-            first.rejection.as_deref(),
+            first.rejection.map(|k| k.name()),
             Some("ImplausibleJump"),
             "{first:?}"
         );
@@ -1274,7 +861,7 @@ mod tests {
             angle_increment: std::f64::consts::PI / 360.0,
             ranges: vec![Err(crate::geometry::BeamFault::NoReturn); 361],
         };
-        let mut mapper = OfflineMapper::new(MapperConfig::default());
+        let mut mapper = Mapper::new(MapperConfig::default());
         let first = mapper.process(&ScanRecord {
             scan: cast_scan(&world, &start, &spec, 0.0, &mut rng),
             odometry: Some(start),
@@ -1287,7 +874,7 @@ mod tests {
             scan: blind(0.2),
             odometry: Some(moved),
         });
-        assert_eq!(second.rejection.as_deref(), Some("TooFewMatches"));
+        assert_eq!(second.rejection, Some(RejectionKind::TooFewMatches));
         assert!(second.keyframe);
         assert!((second.pose.x - 0.5).abs() < 1e-9);
         // Frozen odometry: predicted at constant velocity (another 0.5 m),

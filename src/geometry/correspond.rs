@@ -1,16 +1,5 @@
 //! Line correspondence (Zhang & Ghosh §4) over a spatial index of map lines.
 //!
-//! API (contract with the map builder; keep up to date):
-//! - `SegmentId(u32)`: stable id, never reused after `remove`.
-//! - `SegmentIndex`: `new()`, `insert(CogLine) -> SegmentId`,
-//!   `update(SegmentId, CogLine) -> bool`, `remove(SegmentId) -> Option<CogLine>`,
-//!   `get(SegmentId) -> Option<&CogLine>`, `iter() -> (SegmentId, &CogLine)`,
-//!   `len()`, `is_empty()`,
-//!   `candidates(&CogLine, &CorrespondenceConfig) -> impl Iterator<Item = SegmentId>`,
-//!   `best_match(&CogLine, &CorrespondenceConfig) -> Option<SegmentId>`.
-//! - `CorrespondenceConfig { max_angle_diff, max_centre_distance, extent_tolerance }`.
-//! - `lines_correspond(&CogLine, &CogLine, &CorrespondenceConfig) -> bool`.
-//!
 //! The index is a parry `Bvh` over the segments' bounding boxes, so a query
 //! costs O(log n) in the map size: a map grows to thousands of segments
 //! while a scan only sees a few dozen.

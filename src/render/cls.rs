@@ -1,11 +1,9 @@
 //! An SVG picture of a CLS map through [`MapPicture`]: actual segments
 //! solid, virtual ones (the frontier) dashed, with the robot's path.
 
+use super::{MapPicture, SegmentStyle};
 use crate::geometry::Pose2;
-use crate::render::{MapPicture, SegmentStyle};
-
-use super::cls_map::ClsMap;
-use super::loops::SegmentMode;
+use crate::map::cls::{ClsMap, SegmentMode};
 
 /// The picture of `map`, with the `trajectory` (if any) and the robot's
 /// final `pose` (if any).

@@ -1,0 +1,134 @@
+//! A log file (CARMEN or recording) mapped from start to end, its outputs
+//! written, and scored against a relations file.
+
+use std::path::Path;
+
+use tracing::warn;
+
+use super::output::write_outputs;
+use super::start::MapMode;
+use super::summary::MappingSummary;
+use super::{Mapper, PipelineError};
+use crate::eval::{EvalError, RelationErrors, evaluate_relations as evaluate_against};
+use crate::files::trajectory::StampedPose;
+use crate::input::{InputError, open_log};
+use crate::pipeline::config::MapperConfig;
+
+/// Progress of [`run_offline_mapping`], reported after every scan.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Progress {
+    pub scans: usize,
+    /// Bytes of the input consumed so far.
+    pub bytes_read: u64,
+    /// Size of the input (bytes).
+    pub bytes_total: u64,
+}
+
+/// How [`run_offline_mapping`] runs.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct MapRunOptions<'a> {
+    /// Draw the accepted loop closures on the picture.
+    pub draw_loops: bool,
+    /// Stop at the first input item that cannot be used.
+    pub strict: bool,
+    /// Go on from a saved map, localizing in it or extending it, instead
+    /// of starting a new one.
+    pub start_from: Option<(&'a Path, MapMode)>,
+}
+
+/// How many skipped input items are named one by one (the rest counted).
+pub const SKIPPED_EXAMPLES: usize = 5;
+
+/// Maps a log file offline and writes its outputs (see [`write_outputs`])
+/// into `out_dir` (created if needed). Input items that cannot be used (a
+/// malformed line, a bad odometry sample, a damaged recording record, a
+/// scan out of time order) are skipped, counted and the first few named
+/// (see [`crate::input`]); with `strict` the first one ends the run with
+/// its error and nothing is written. A recording cut short (a killed
+/// recorder, a power loss) is mapped up to the break; the summary says
+/// where it broke.
+pub fn run_offline_mapping(
+    input: &Path,
+    out_dir: &Path,
+    config: &MapperConfig,
+    options: &MapRunOptions<'_>,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<MappingSummary, PipelineError> {
+    let MapRunOptions {
+        draw_loops,
+        strict,
+        start_from,
+    } = *options;
+    let mut mapper = match start_from {
+        Some((map, mode)) => {
+            let loaded = crate::map::file::load(map)?;
+            Mapper::from_map(*config, loaded.contents, mode)?
+        }
+        None => Mapper::new(*config),
+    };
+    let mut log = open_log(input)?;
+    mapper.defer_cls_rebuild();
+    let mut input_broken = None;
+    let (mut skipped, mut examples) = (0, Vec::new());
+    while let Some(record) = log.next() {
+        let record = match record {
+            Ok(r) => r,
+            Err(e) if e.is_skipped_item() && !strict => {
+                skipped += 1;
+                if examples.len() < SKIPPED_EXAMPLES {
+                    warn!("skipped: {e}");
+                    examples.push(e.to_string());
+                }
+                continue;
+            }
+            Err(InputError::Recording(e)) if !strict => {
+                warn!("{e}: mapping the scans before the break");
+                input_broken = Some(e.to_string());
+                break;
+            }
+            Err(e) => return Err(e.into()),
+        };
+        mapper.process(&record);
+        progress(Progress {
+            scans: mapper.summary.scans,
+            bytes_read: log.bytes_read(),
+            bytes_total: log.size(),
+        });
+    }
+    if mapper.trajectory().is_empty() {
+        if mapper.summary.scans_before_start > 0 {
+            return Err(PipelineError::StartMap(format!(
+                "the robot was not found in the map in any of the {} scans",
+                mapper.summary.scans_before_start
+            )));
+        }
+        return Err(PipelineError::NoScans);
+    }
+    mapper.finish();
+    let mut summary = mapper.summary();
+    summary.input_broken = input_broken;
+    summary.skipped_input = skipped;
+    summary.skipped_examples = examples;
+    if skipped > SKIPPED_EXAMPLES {
+        warn!("{skipped} input items skipped in all");
+    }
+    if summary.rejected_localizations > 0 {
+        warn!(
+            rejected = summary.rejected_localizations,
+            scans = summary.scans,
+            by_kind = ?summary.rejections_by_kind,
+            "localization failed on some scans; their odometry prediction was used"
+        );
+    }
+    write_outputs(out_dir, &mapper, draw_loops)?;
+    Ok(summary)
+}
+
+/// The relation metric of a trajectory against a relations file; see
+/// [`crate::eval`].
+pub fn evaluate_relations(
+    trajectory: &[StampedPose],
+    relations_path: &Path,
+) -> Result<RelationErrors, EvalError> {
+    evaluate_against(trajectory, relations_path)
+}

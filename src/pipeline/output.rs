@@ -1,0 +1,73 @@
+//! The files a run writes into its directory, each atomically: the
+//! trajectory, the map and its picture.
+
+use std::path::Path;
+
+use super::{Mapper, PipelineError};
+use crate::files::trajectory::write_tum;
+use crate::geometry::Pose2;
+use crate::map::MapContents;
+use crate::render::{SegmentStyle, picture};
+
+/// Name of the trajectory written by [`write_outputs`].
+pub const TRAJECTORY_FILE: &str = "trajectory.tum";
+/// Name of the map written by [`write_outputs`] (see
+/// [`crate::map::file`]).
+pub const MAP_FILE: &str = "map.json";
+/// Name of the map's picture written by [`write_outputs`].
+pub const PICTURE_FILE: &str = "map.svg";
+
+fn write_file(path: &Path, bytes: &[u8]) -> Result<(), PipelineError> {
+    crate::files::durable::write_atomically(path, bytes).map_err(|source| PipelineError::Output {
+        path: path.to_owned(),
+        source,
+    })
+}
+
+/// Writes what a mapper built into `out_dir` (created if needed), each
+/// file atomically: the trajectory ([`TRAJECTORY_FILE`]), the map
+/// ([`MAP_FILE`]: CLS map, walls, keyframes, pose graph) and its picture
+/// with the trajectory ([`PICTURE_FILE`]).
+pub fn write_outputs(
+    out_dir: &Path,
+    mapper: &Mapper,
+    draw_loops: bool,
+) -> Result<(), PipelineError> {
+    create_output_dir(out_dir)?;
+    let mut tum = Vec::new();
+    write_tum(&mut tum, mapper.trajectory())?;
+    write_file(&out_dir.join(TRAJECTORY_FILE), &tum)?;
+    let poses: Vec<Pose2> = mapper.trajectory().iter().map(|(_, p)| *p).collect();
+    let loops = if draw_loops {
+        mapper.loop_edges()
+    } else {
+        Vec::new()
+    };
+    write_maps(out_dir, &mapper.contents(), &poses, &loops)
+}
+
+/// Creates `out_dir` and its parents if needed.
+pub fn create_output_dir(out_dir: &Path) -> Result<(), PipelineError> {
+    std::fs::create_dir_all(out_dir).map_err(|source| PipelineError::Output {
+        path: out_dir.to_owned(),
+        source,
+    })
+}
+
+/// Writes the map into `out_dir`, each file atomically: [`MAP_FILE`]
+/// (see [`crate::map::file`]) and its picture ([`PICTURE_FILE`]) with
+/// `path` (and the loop closures `loops`, each from one keyframe position
+/// to another) drawn on it.
+pub fn write_maps(
+    out_dir: &Path,
+    contents: &MapContents,
+    path: &[Pose2],
+    loops: &[[[f64; 2]; 2]],
+) -> Result<(), PipelineError> {
+    crate::map::file::save(&out_dir.join(MAP_FILE), contents)?;
+    let mut pic = picture(&contents.cls, Some(path), path.last().copied());
+    for [a, b] in loops {
+        pic.segment(*a, *b, SegmentStyle::LoopEdge);
+    }
+    write_file(&out_dir.join(PICTURE_FILE), pic.to_svg().as_bytes())
+}

@@ -1,0 +1,76 @@
+//! Why a scan's localization was not used: the reason ([`Rejection`],
+//! with its numbers, for the log) and its kind ([`RejectionKind`], counted
+//! in the summary).
+
+use serde::Serialize;
+use thiserror::Error;
+
+use crate::localize::LocalizeError;
+
+/// Why a scan's localization was not used.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub(super) enum Rejection {
+    #[error(transparent)]
+    Localize(LocalizeError),
+    #[error("correction of {sigmas:.1} σ from the odometry prediction")]
+    Inconsistent { sigmas: f64 },
+}
+
+impl Rejection {
+    pub(super) fn kind(&self) -> RejectionKind {
+        match self {
+            Rejection::Localize(e) => match e {
+                LocalizeError::TooFewMatches { .. } => RejectionKind::TooFewMatches,
+                LocalizeError::ImplausibleJump { .. } => RejectionKind::ImplausibleJump,
+                LocalizeError::InvalidPrior => RejectionKind::InvalidPrior,
+                LocalizeError::NonFiniteInput { .. } => RejectionKind::NonFiniteInput,
+                LocalizeError::Singular => RejectionKind::Singular,
+                LocalizeError::NotConverged { .. } => RejectionKind::NotConverged,
+            },
+            Rejection::Inconsistent { .. } => RejectionKind::InconsistentWithOdometry,
+        }
+    }
+}
+
+/// The kind of a scan's rejection, as the summary counts it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+pub enum RejectionKind {
+    /// Too few lines matched the map.
+    TooFewMatches,
+    /// The fix jumped further from the prediction than allowed.
+    ImplausibleJump,
+    /// The prediction's covariance was unusable.
+    InvalidPrior,
+    /// A line or the prediction was not finite.
+    NonFiniteInput,
+    /// The matched lines left the pose undetermined.
+    Singular,
+    /// The solver did not converge.
+    NotConverged,
+    /// The fix disagreed with the odometry beyond `max_correction_sigmas`.
+    InconsistentWithOdometry,
+    /// Before the robot was found in a loaded map: no pose at all.
+    NotFoundInTheMapYet,
+}
+
+impl RejectionKind {
+    /// The kind's name, as the summary and the logs write it.
+    pub fn name(self) -> &'static str {
+        match self {
+            RejectionKind::TooFewMatches => "TooFewMatches",
+            RejectionKind::ImplausibleJump => "ImplausibleJump",
+            RejectionKind::InvalidPrior => "InvalidPrior",
+            RejectionKind::NonFiniteInput => "NonFiniteInput",
+            RejectionKind::Singular => "Singular",
+            RejectionKind::NotConverged => "NotConverged",
+            RejectionKind::InconsistentWithOdometry => "InconsistentWithOdometry",
+            RejectionKind::NotFoundInTheMapYet => "NotFoundInTheMapYet",
+        }
+    }
+}
+
+impl std::fmt::Display for RejectionKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
