@@ -10,6 +10,7 @@ use clsmap::demo::{DemoStop, demo_config, run_demo};
 use clsmap::map::cls::{ClsMap, ClsMapConfig};
 
 #[test]
+#[ignore = "a minute of real time; CI runs it: cargo test --test demo -- --ignored"]
 fn the_demo_world_is_explored_to_completion_through_the_pty() {
     // Exactly what `clsmap demo` runs (about a minute of real time).
     let config = demo_config().unwrap();

@@ -4,10 +4,10 @@
 //!
 //! The CLS map is a polygon with holes (free space on the left of every
 //! segment). i_overlay offsets it inwards by the clearance (`outline` with
-//! a negative offset, miter joins: at an obstacle corner the miter lies
-//! farther out than the true arc of radius r, so the shrunk region is
-//! conservative). A frontier is treated like a wall here: what lies beyond
-//! it is unknown.
+//! a negative offset and round joins, the arc drawn as chords with the
+//! offset widened so every chord keeps the clearance; see
+//! [`FreeSpace::from_shapes`]). A frontier is treated like a wall here:
+//! what lies beyond it is unknown.
 //!
 //! The edges sit in a parry BVH, so inside tests cost what the edges near
 //! the query cost, not what the whole map costs.

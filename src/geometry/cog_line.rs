@@ -1,12 +1,5 @@
 //! The paper's COG ("centre of gravity") line: a fitted line segment with
 //! its direction, centroid, uncertainties and extent.
-//!
-//! API (contract with the map builder; keep up to date):
-//! - `CogLine { theta, xc, yc, sigma_theta, sigma_c, start, end, n_points }`
-//! - `length()`, `direction()`, `normal()` (left normal, towards free space),
-//!   `centre()`, `transformed(&Pose2)`, `line_coefficients() -> (a, b, c)`,
-//!   `signed_distance(p)`, `distance_to_point(p)`, `project_point(p)`,
-//!   `along(p)`, `extent() -> (s_start, s_end)`, `sigma_offset_at(s)`.
 
 use serde::{Deserialize, Serialize};
 

@@ -1,15 +1,6 @@
 //! Line extraction from one range scan (Zhang & Ghosh §2): valid points,
 //! runs split at range discontinuities, recursive split, merge of collinear
 //! neighbours, total-least-squares fit, COG lines with propagated variances.
-//!
-//! API (contract with the map builder; keep up to date):
-//! - `ExtractionConfig` (serde, defaults documented per field), `RangeNoise`.
-//! - `extract_lines(&RangeScan, mount: &Pose2, &ExtractionConfig) -> Vec<CogLine>`:
-//!   lines in the ROBOT frame (`mount` = laser pose in the robot frame), in
-//!   scan order, free space on each line's left.
-//! - `scan_points(&RangeScan, mount, &ExtractionConfig) -> Vec<[f64; 2]>`:
-//!   the valid points in the robot frame, in scan order.
-//! - `LineExtractor`: the same with reusable buffers, for a real-time loop.
 
 use serde::{Deserialize, Serialize};
 

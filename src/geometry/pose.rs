@@ -1,16 +1,11 @@
 //! Planar rigid transforms (SE(2)) in metres and radians.
 
 use serde::{Deserialize, Serialize};
-use std::f64::consts::{PI, TAU};
+use std::f64::consts::TAU;
 
-/// Wraps an angle to (-π, π].
-pub fn wrap_angle(a: f64) -> f64 {
-    let mut r = a.rem_euclid(TAU);
-    if r > PI {
-        r -= TAU;
-    }
-    r
-}
+/// Wraps an angle to (-π, π]: the base crate's, so odometry and the
+/// mapper agree to the bit on every angle.
+pub use clsmap_base::kinematics::wrap_angle;
 
 /// Wraps an angle to [0, 2π), the range of a COG line direction.
 pub fn wrap_angle_positive(a: f64) -> f64 {
@@ -92,6 +87,7 @@ impl Pose2 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f64::consts::PI;
 
     fn close(a: &Pose2, b: &Pose2) -> bool {
         (a.x - b.x).abs() < 1e-12

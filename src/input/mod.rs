@@ -17,7 +17,7 @@ pub mod lms200;
 pub mod odometry;
 
 pub use carmen::{CarmenEntry, CarmenScans, MalformedLine, NO_RETURN_RANGE};
-pub use odometry::{OdometryError, OdometrySample, OdometryTrack};
+pub use odometry::{OdometryError, OdometryTrack};
 
 use crate::geometry::{Pose2, RangeScan};
 use std::cell::Cell;

@@ -9,11 +9,12 @@
 use crate::geometry::Pose2;
 use thiserror::Error;
 
-/// One odometry reading: time (s) and pose in the odometry frame (m, rad).
+/// One odometry reading of a track: time (s) and pose in the odometry
+/// frame (m, rad). (A base's own readings are `clsmap_base::OdometrySample`.)
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct OdometrySample {
-    pub t: f64,
-    pub pose: Pose2,
+struct Sample {
+    t: f64,
+    pose: Pose2,
 }
 
 /// Why a sample was refused by [`OdometryTrack::push`].
@@ -30,7 +31,7 @@ pub enum OdometryError {
 /// A time-ordered run of odometry samples.
 #[derive(Debug, Clone, Default)]
 pub struct OdometryTrack {
-    samples: Vec<OdometrySample>,
+    samples: Vec<Sample>,
 }
 
 impl OdometryTrack {
@@ -52,7 +53,7 @@ impl OdometryTrack {
         {
             return Err(OdometryError::OutOfOrder { t, last: last.t });
         }
-        self.samples.push(OdometrySample { t, pose });
+        self.samples.push(Sample { t, pose });
         Ok(())
     }
 

@@ -1,16 +1,6 @@
 //! Local localization (Zhang & Ghosh §5): the robot pose from the lines of
 //! one scan matched against the map, starting from a predicted pose.
 //!
-//! API (contract with the map builder; keep up to date):
-//! - `LocalizerConfig` (serde, defaults documented per field).
-//! - `localize(local_lines: &[CogLine] /* robot frame */, map: &SegmentIndex,
-//!    predicted: Pose2, prior: &[[f64; 3]; 3] /* covariance of predicted, x y θ */,
-//!    cfg: &LocalizerConfig) -> Result<LocalizationResult, LocalizeError>`.
-//! - `LocalizationResult { pose, covariance, matches, degenerate, iterations, chi2,
-//!    heading_searched }`.
-//! - `LocalizeError`: `TooFewMatches`, `ImplausibleJump`, `InvalidPrior`,
-//!   `NonFiniteInput`, `Singular`, `NotConverged`.
-//!
 //! # Method
 //!
 //! 1. Match each local line (moved by the prediction) against the map, with

@@ -1,15 +1,6 @@
 //! The incremental map of actual (observed) line segments, in the map
 //! frame, with the paper's fusion of corresponding segments.
 //!
-//! API (for the pipeline and the CLS map; keep up to date):
-//! - `SegmentMapConfig` (serde): fusion gates, bridging gap, σ floors.
-//! - `SegmentMap::new(cfg)`, `update(local_lines, pose, pose_cov) ->
-//!   UpdateStats`, `index() -> &SegmentIndex`, `len()`, `segments()`,
-//!   `observations(id)`, `from_walls(cfg, walls)` (as a map file stores them).
-//! - `blur_by_pose(line_robot, pose, cov) -> CogLine` (map frame) and
-//!   `fuse(a, b) -> Option<CogLine>`: the two steps of an update, public
-//!   so the CLS map can fuse the same way.
-//!
 //! # Fusion
 //!
 //! A scan's line, moved into the map frame with the corrected pose, is

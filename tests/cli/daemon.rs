@@ -1,0 +1,252 @@
+//! `clsmap run`: the daemon as systemd runs it, driven by signals.
+
+use super::*;
+
+/// A running `clsmap run`, its stderr lines arriving on a channel.
+struct Daemon {
+    child: Child,
+    lines: std::sync::mpsc::Receiver<String>,
+    seen: Vec<String>,
+}
+
+impl Daemon {
+    fn start(config: &Path) -> Daemon {
+        let mut child = clsmap_command()
+            .args(["run", "--config", arg(config)])
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let (tx, lines) = std::sync::mpsc::channel();
+        let stderr = child.stderr.take().unwrap();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines() {
+                let Ok(line) = line else { break };
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        Daemon {
+            child,
+            lines,
+            seen: Vec::new(),
+        }
+    }
+
+    /// Waits (at most `limit`) for a stderr line containing `text`.
+    fn wait_for(&mut self, text: &str, limit: Duration) {
+        let deadline = Instant::now() + limit;
+        if self.seen.iter().any(|l| l.contains(text)) {
+            return;
+        }
+        while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+            match self.lines.recv_timeout(left) {
+                Ok(line) => {
+                    let found = line.contains(text);
+                    self.seen.push(line);
+                    if found {
+                        return;
+                    }
+                }
+                Err(_) => break,
+            }
+        }
+        let _ = self.child.kill();
+        panic!(
+            "no line with {text:?} within {limit:?}; stderr so far:\n{}",
+            self.seen.join("\n")
+        );
+    }
+
+    fn signal(&self, name: &str) {
+        let status = Command::new("kill")
+            .args([&format!("-{name}"), &self.child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success(), "kill -{name} failed");
+    }
+
+    /// Waits for the exit; returns the status, stdout and all of stderr.
+    fn finish(mut self, limit: Duration) -> (ExitStatus, String, String) {
+        let stdout = drain(self.child.stdout.take());
+        let status = wait_at_most(&mut self.child, limit)
+            .unwrap_or_else(|| panic!("clsmap run did not stop within {limit:?}"));
+        self.seen.extend(self.lines.try_iter());
+        // The reader thread ends with the pipe; collect what is left.
+        std::thread::sleep(Duration::from_millis(50));
+        self.seen.extend(self.lines.try_iter());
+        (status, stdout.join().unwrap(), self.seen.join("\n"))
+    }
+}
+
+fn demo_run_config(dir: &TempDir, extra: &str) -> PathBuf {
+    let text =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("config/demo.toml"))
+            .unwrap()
+            .replace("exit_when_complete = true", "exit_when_complete = false")
+            .replace("checkpoint_interval = 30.0", "checkpoint_interval = 1.0")
+            .replace("status_interval = 5.0", "status_interval = 1.0")
+            .replace(
+                "[daemon]",
+                &format!(
+                    "[daemon]\nstate_dir = {:?}",
+                    dir.join("state").display().to_string()
+                ),
+            );
+    let path = dir.join("clsmap.toml");
+    std::fs::write(&path, format!("{text}\n{extra}")).unwrap();
+    path
+}
+
+/// The one run directory `clsmap run` made below `state`.
+fn run_dir(state: &Path) -> PathBuf {
+    let dirs: Vec<PathBuf> = std::fs::read_dir(state)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(dirs.len(), 1, "{dirs:?}");
+    dirs[0].clone()
+}
+
+#[test]
+fn run_reloads_on_sighup_and_stops_cleanly_on_sigterm_leaving_a_loadable_map() {
+    let dir = TempDir::new("run-sigterm");
+    let config = demo_run_config(&dir, "");
+    let mut daemon = Daemon::start(&config);
+    daemon.wait_for("first scan mapped", Duration::from_secs(60));
+    daemon.wait_for("exploration: goal reached", Duration::from_secs(60));
+    // A tunable change is applied; a change of the sensor needs a restart.
+    let text = std::fs::read_to_string(&config).unwrap();
+    std::fs::write(
+        &config,
+        text.replace("speed = 0.6", "speed = 0.4")
+            .replace("[sensor]", "[sensor]\nsilence_stop = 0.8"),
+    )
+    .unwrap();
+    daemon.signal("HUP");
+    daemon.wait_for(
+        "need a restart and are not applied: sensor",
+        Duration::from_secs(20),
+    );
+    // A broken file is refused and the running configuration stays.
+    std::fs::write(&config, "[sensor]\nbaud = 57600\n").unwrap();
+    daemon.signal("HUP");
+    daemon.wait_for("reload refused", Duration::from_secs(20));
+    daemon.wait_for("sensor.baud (line 2)", Duration::from_secs(1));
+    // Turning exploration off takes effect at once.
+    std::fs::write(&config, text.replace("enabled = true", "enabled = false")).unwrap();
+    daemon.signal("HUP");
+    daemon.wait_for("exploration off", Duration::from_secs(20));
+    daemon.signal("TERM");
+    let (status, stdout, stderr) = daemon.finish(Duration::from_secs(30));
+    assert!(status.success(), "{status}\n{stderr}");
+    assert!(stdout.contains("stopped (Shutdown)"), "{stdout}");
+    assert!(stderr.contains("SIGTERM: stopping"), "{stderr}");
+    // The link was closed: the sensor stopped streaming before the exit.
+    assert!(stderr.contains("sensor link closed"), "{stderr}");
+    let run = run_dir(&dir.join("state"));
+    let map = clsmap::map::cls::ClsMap::load(
+        &run.join("map.json"),
+        clsmap::map::cls::ClsMapConfig::default(),
+    )
+    .unwrap();
+    map.check_invariants().unwrap();
+    assert!(map.actual_segments().count() > 3, "{stderr}");
+    assert!(run.join("map.svg").is_file() && run.join("trajectory.tum").is_file());
+}
+
+#[test]
+fn run_without_its_sensor_keeps_retrying_and_still_stops_cleanly() {
+    let dir = TempDir::new("run-nosensor");
+    let config = dir.join("clsmap.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[sensor]\nport = \"/dev/clsmap-test-no-such-port\"\nretry_initial = 0.2\nretry_max = 0.4\n\
+             [daemon]\nstate_dir = {:?}\nstatus_interval = 0.2\nready_after = 0.5\n",
+            dir.join("state").display().to_string()
+        ),
+    )
+    .unwrap();
+    let mut daemon = Daemon::start(&config);
+    daemon.wait_for("clsmap-test-no-such-port", Duration::from_secs(30));
+    daemon.wait_for("trying again", Duration::from_secs(5));
+    // Retried, not given up: more failures come after the back-off.
+    std::thread::sleep(Duration::from_millis(800));
+    daemon.signal("TERM");
+    let (status, stdout, stderr) = daemon.finish(Duration::from_secs(30));
+    assert!(status.success(), "{status}\n{stderr}");
+    assert!(
+        stderr.matches("trying again").count() >= 2,
+        "expected retries:\n{stderr}"
+    );
+    assert!(
+        stderr.contains("waiting for the sensor") || stderr.contains("SENSOR FAILING"),
+        "{stderr}"
+    );
+    // Nothing was mapped: no empty run directory is left behind.
+    assert!(stdout.contains("nothing mapped, nothing saved"), "{stdout}");
+    let runs = std::fs::read_dir(dir.join("state")).unwrap().count();
+    assert_eq!(runs, 0);
+}
+
+#[test]
+fn run_refuses_a_bad_config_naming_the_key_and_line() {
+    let dir = TempDir::new("run-badconfig");
+    let config = dir.join("clsmap.toml");
+    std::fs::write(&config, "# robot\n[base]\nmax_speed = -1.0\n").unwrap();
+    let run = clsmap(&["run", "--config", arg(&config)]);
+    assert!(!run.status.success(), "{run}");
+    assert!(run.stderr.contains("base.max_speed (line 3)"), "{run}");
+    std::fs::write(&config, "[sensor]\nprot = \"/dev/ttyUSB0\"\n").unwrap();
+    let run = clsmap(&["run", "--config", arg(&config)]);
+    assert!(!run.status.success(), "{run}");
+    assert!(
+        run.stderr.contains("prot") && run.stderr.contains("line 2"),
+        "{run}"
+    );
+    let run = clsmap(&["run", "--config", arg(&dir.join("missing.toml"))]);
+    assert!(
+        !run.status.success() && run.stderr.contains("missing.toml"),
+        "{run}"
+    );
+}
+
+/// Hardening: links planted at the names a map write used to take (the
+/// temporary file's `.map.json.tmp-<pid>`, with the pid known to a shell
+/// that `exec`s the mapper) are never followed: the file they point at
+/// keeps its contents and `map.json` is a regular file.
+#[cfg(unix)]
+#[test]
+fn a_planted_link_never_redirects_a_map_write() {
+    let dir = std::env::temp_dir().join(format!("clsmap-cli-link-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = dir.join("o");
+    std::fs::create_dir_all(&out).unwrap();
+    let victim = dir.join("victim");
+    std::fs::write(&victim, "keep\n").unwrap();
+    let script = format!(
+        "for n in map.json.tmp-$$ map.svg.tmp-$$ trajectory.tum.tmp-$$; do ln -s '{}' '{}'/.$n; done; exec '{}' map '{}' --out '{}'",
+        victim.display(),
+        out.display(),
+        env!("CARGO_BIN_EXE_clsmap"),
+        fixture(CSAIL_FIXTURE).display(),
+        out.display()
+    );
+    let status = Command::new("sh")
+        .arg("-c")
+        .arg(&script)
+        .env("NO_COLOR", "1")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .unwrap();
+    assert!(status.success());
+    assert_eq!(std::fs::read_to_string(&victim).unwrap(), "keep\n");
+    let meta = std::fs::symlink_metadata(out.join("map.json")).unwrap();
+    assert!(meta.file_type().is_file());
+    clsmap::map::file::load(&out.join("map.json")).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+}
