@@ -29,3 +29,138 @@ pub fn error_chain(e: &dyn std::error::Error) -> String {
     }
     text
 }
+
+#[cfg(test)]
+mod layers {
+    use std::path::{Path, PathBuf};
+
+    /// The layers of the crate, lowest first, and what each module may use
+    /// besides the crate root's helpers: a module imports only from layers
+    /// below its own (its tests may use the simulator and test helpers).
+    const LAYERS: &[(&str, &[&str])] = &[
+        ("geometry", &[]),
+        ("files", &["geometry"]),
+        ("input", &["geometry", "files"]),
+        ("sim", &["geometry"]),
+        ("eval", &["geometry", "files"]),
+        ("map", &["geometry", "files"]),
+        ("localize", &["geometry", "map"]),
+        ("render", &["geometry", "map"]),
+        ("explore", &["geometry", "map"]),
+        ("graph", &["geometry", "map", "localize"]),
+        (
+            "pipeline",
+            &[
+                "geometry", "files", "input", "eval", "map", "localize", "render", "graph",
+            ],
+        ),
+        (
+            "daemon",
+            &[
+                "geometry", "files", "input", "eval", "map", "localize", "render", "graph",
+                "pipeline", "explore", "sim",
+            ],
+        ),
+        (
+            "demo",
+            &[
+                "geometry", "files", "input", "eval", "map", "localize", "render", "graph",
+                "pipeline", "explore", "sim", "daemon",
+            ],
+        ),
+    ];
+
+    /// The `.rs` files of module `name` (a directory or one file), tests
+    /// files left out.
+    fn sources(src: &Path, name: &str) -> Vec<PathBuf> {
+        let file = src.join(format!("{name}.rs"));
+        let mut out = Vec::new();
+        let mut dirs = vec![src.join(name)];
+        if file.is_file() {
+            out.push(file);
+        }
+        while let Some(dir) = dirs.pop() {
+            let Ok(entries) = std::fs::read_dir(&dir) else {
+                continue;
+            };
+            for entry in entries.flatten() {
+                let path = entry.path();
+                if path.is_dir() {
+                    dirs.push(path);
+                } else if path.extension().is_some_and(|e| e == "rs")
+                    && path.file_name().is_some_and(|n| n != "tests.rs")
+                {
+                    out.push(path);
+                }
+            }
+        }
+        out
+    }
+
+    /// The top-level modules `crate::…` names in the code (not comments,
+    /// not the `#[cfg(test)]` part at the end) of `text`.
+    fn used_modules(text: &str) -> Vec<String> {
+        let code = text.split("\n#[cfg(test)]").next().unwrap_or("");
+        let mut used = Vec::new();
+        for line in code.lines().filter(|l| !l.trim_start().starts_with("//")) {
+            for (i, _) in line.match_indices("crate::") {
+                let rest = &line[i + "crate::".len()..];
+                let name: String = rest
+                    .chars()
+                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                    .collect();
+                if !name.is_empty() {
+                    used.push(name);
+                }
+            }
+        }
+        used
+    }
+
+    #[test]
+    fn no_module_imports_from_a_layer_above_its_own() {
+        let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+        let layered: Vec<&str> = LAYERS.iter().map(|(m, _)| *m).collect();
+        let mut wrong = Vec::new();
+        for (module, allowed) in LAYERS {
+            let files = sources(&src, module);
+            assert!(!files.is_empty(), "no sources for module {module}");
+            for file in files {
+                let text = std::fs::read_to_string(&file).expect("readable source");
+                for used in used_modules(&text) {
+                    let is_module = layered.contains(&used.as_str());
+                    if is_module && used != *module && !allowed.contains(&used.as_str()) {
+                        wrong.push(format!("{} uses crate::{used}", file.display()));
+                    }
+                }
+            }
+        }
+        wrong.sort();
+        wrong.dedup();
+        assert!(
+            wrong.is_empty(),
+            "imports against the layering:\n{}",
+            wrong.join("\n")
+        );
+    }
+
+    #[test]
+    fn every_module_of_the_crate_has_a_layer() {
+        let lib = include_str!("lib.rs");
+        for line in lib.lines() {
+            if let Some(name) = line.strip_prefix("pub mod ") {
+                let name = name.trim_end_matches(';');
+                assert!(
+                    LAYERS.iter().any(|(m, _)| *m == name),
+                    "module {name} has no layer in LAYERS"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn the_check_sees_an_import_in_code_and_not_in_comments_or_tests() {
+        let text = "use crate::daemon::Core;\n// crate::sim in a comment\nfn f() {}\n#[cfg(test)]\nmod tests { use crate::sim::Rng; }\n";
+        assert_eq!(used_modules(text), vec!["daemon".to_string()]);
+    }
+}

@@ -20,7 +20,7 @@
 //! bytes, so no edit reaches the map unchecked. It comes last so the
 //! payload streams to the file as it is serialised (a large map is never
 //! held as text in memory). Files are written atomically (see
-//! [`crate::durable`]). Version 1 files (the CLS map only)
+//! [`crate::files::durable`]). Version 1 files (the CLS map only)
 //! still load, with no walls or keyframes.
 
 use std::io::Write as _;
