@@ -477,9 +477,66 @@ pub fn status_line(s: &LiveStatus, rate: f64, sensor: &str) -> String {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
     use crate::geometry::Pose2;
+
+    /// A core with no base and no sensor, from the daemon's TOML.
+    fn core(toml: &str) -> Core {
+        let config = DaemonConfig::from_toml(toml).unwrap();
+        let live = LiveMapper::new(config.mapper, None, 0.0);
+        let base = BaseDriver::new(None, config.base.limits(), 0.5, 1.0, 8.0);
+        Core::new(config, live, base)
+    }
+
+    #[test]
+    fn without_scans_ready_comes_once_after_ready_after() {
+        let mut c = core("[daemon]\nready_after = 2.0\n");
+        c.handle_tick(0.0, None);
+        assert!(!c.poll_ready());
+        c.handle_tick(1.9, None);
+        assert!(!c.poll_ready());
+        c.handle_tick(2.05, None);
+        assert!(c.poll_ready(), "READY once ready_after has passed");
+        c.handle_tick(2.5, None);
+        assert!(!c.poll_ready(), "READY is sent once");
+    }
+
+    #[test]
+    fn the_status_line_comes_every_status_interval_and_names_a_silent_sensor() {
+        let mut c = core("[daemon]\nstatus_interval = 1.0\n");
+        c.handle_tick(0.0, None);
+        let first = c.poll_status().unwrap();
+        assert!(first.starts_with("waiting for the sensor"), "{first}");
+        c.handle_tick(0.5, None);
+        assert!(c.poll_status().is_none());
+        c.handle_sensor_failure("cannot open /dev/lms200");
+        c.handle_tick(1.0, None);
+        let line = c.poll_status().unwrap();
+        assert!(line.contains("SENSOR FAILING (cannot open /dev/lms200)"), "{line}");
+    }
+
+    #[test]
+    fn the_time_limit_stops_the_loop_and_no_checkpoint_comes_before_a_scan() {
+        let mut c = core("[daemon]\nmax_run_time = 3.0\ncheckpoint_interval = 1.0\n");
+        let mut t = 0.0;
+        while c.poll_stop().is_none() && t < 10.0 {
+            c.handle_tick(t, None);
+            assert!(!c.poll_checkpoint(), "nothing to save before the first scan");
+            t = c.poll_timeout();
+        }
+        assert_eq!(c.poll_stop(), Some(StopReason::TimeLimit));
+        assert!((3.0..3.2).contains(&t), "stopped at {t} s");
+    }
+
+    #[test]
+    fn the_next_timeout_is_the_earliest_timer() {
+        let mut c = core("[base]\nrate = 20.0\n[daemon]\nstatus_interval = 5.0\n");
+        assert_eq!(c.poll_timeout(), 0.0);
+        c.handle_tick(0.0, None);
+        assert!((c.poll_timeout() - 0.05).abs() < 1e-12);
+    }
 
     #[test]
     fn a_timer_skips_the_ticks_a_busy_loop_missed() {
