@@ -489,7 +489,8 @@ fn a_saved_map_is_localized_in_and_extended() {
     assert!(graph.len() > saved.keyframes.len(), "no keyframe added");
     assert!(graph.stats().accepted > 0, "{:?}", graph.stats());
     // New keyframes are not chained to the old session's last one: the
-    // first new keyframe's only edge into the old graph is a loop edge.
+    // first new keyframe's edges into the old graph are loop edges (where
+    // it was found, and any loop closed at it).
     let first_new = saved.keyframes.len();
     let into_old: Vec<_> = graph
         .graph()
@@ -497,7 +498,12 @@ fn a_saved_map_is_localized_in_and_extended() {
         .iter()
         .filter(|e| e.to == first_new && e.from < first_new)
         .collect();
-    assert_eq!(into_old.len(), 1);
-    assert_eq!(into_old[0].kind, clsmap::map::EdgeKind::Loop);
+    assert!(!into_old.is_empty());
+    assert!(
+        into_old
+            .iter()
+            .all(|e| e.kind == clsmap::map::EdgeKind::Loop),
+        "{into_old:?}"
+    );
     extended.cls_map().check_invariants().unwrap();
 }

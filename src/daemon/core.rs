@@ -514,7 +514,10 @@ mod tests {
         c.handle_sensor_failure("cannot open /dev/lms200");
         c.handle_tick(1.0, None);
         let line = c.poll_status().unwrap();
-        assert!(line.contains("SENSOR FAILING (cannot open /dev/lms200)"), "{line}");
+        assert!(
+            line.contains("SENSOR FAILING (cannot open /dev/lms200)"),
+            "{line}"
+        );
     }
 
     #[test]
@@ -523,7 +526,10 @@ mod tests {
         let mut t = 0.0;
         while c.poll_stop().is_none() && t < 10.0 {
             c.handle_tick(t, None);
-            assert!(!c.poll_checkpoint(), "nothing to save before the first scan");
+            assert!(
+                !c.poll_checkpoint(),
+                "nothing to save before the first scan"
+            );
             t = c.poll_timeout();
         }
         assert_eq!(c.poll_stop(), Some(StopReason::TimeLimit));

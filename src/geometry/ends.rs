@@ -18,14 +18,28 @@ use super::scan::RangeScan;
 const MIN_JUMP: f64 = 0.1;
 /// Least |sin| of the angle between beam and wall: at more grazing angles
 /// consecutive beams land far apart on the wall and its end is vague.
-const MIN_SIN_INCIDENCE: f64 = 0.25;
+pub(crate) const MIN_SIN_INCIDENCE: f64 = 0.25;
 /// A neighbour point farther than this from the line's extension (m, and
 /// at least 3 σ of its range) belongs to another surface.
 const MIN_OFF_LINE: f64 = 0.03;
 
-/// The along-line σ (m) of the end of `line` at its fitted point `end`, if
-/// that end is a true end of the wall; `step` is −1 for the start (the
-/// beam before it in scan order), +1 for the end (the beam after).
+/// A true end of a wall as one scan sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct SeenEnd {
+    /// σ (m) of the end's position along the wall.
+    pub sigma: f64,
+    /// How far (m) the wall's end lies beyond the last point on it, along
+    /// the wall, on average: half a beam spacing there, since the end is
+    /// somewhere between that point and where the next beam would have
+    /// met the wall. Left uncorrected, the last point falls short of the
+    /// end by more the more grazing the view, and views from two places
+    /// disagree about where one end is.
+    pub beyond_last_point: f64,
+}
+
+/// The end of `line` at its fitted point `end`, if that end is a true end
+/// of the wall; `step` is −1 for the start (the beam before it in scan
+/// order), +1 for the end (the beam after).
 pub(crate) fn wall_end(
     scan: &RangeScan,
     mount: &Pose2,
@@ -33,7 +47,7 @@ pub(crate) fn wall_end(
     end: &ScanPoint,
     line: &CogLine,
     step: isize,
-) -> Option<f64> {
+) -> Option<SeenEnd> {
     let next = end.beam_index.checked_add_signed(step)?;
     let Some(Ok(range_next)) = scan.ranges.get(next).copied() else {
         return None;
@@ -74,7 +88,10 @@ pub(crate) fn wall_end(
     let spacing = range_end * scan.angle_increment.abs() / sin_incidence;
     let cos_incidence = (1.0 - sin_incidence * sin_incidence).max(0.0).sqrt();
     let along_noise = end.sigma_range * cos_incidence / sin_incidence;
-    Some((spacing / 12f64.sqrt()).hypot(along_noise))
+    Some(SeenEnd {
+        sigma: (spacing / 12f64.sqrt()).hypot(along_noise),
+        beyond_last_point: 0.5 * spacing,
+    })
 }
 
 #[cfg(test)]
@@ -153,5 +170,41 @@ mod tests {
             wall.wall_ends.start.is_none() && wall.wall_ends.end.is_none(),
             "{wall:?}"
         );
+    }
+
+    #[test]
+    fn a_jamb_seen_from_far_and_near_is_placed_at_the_same_place() {
+        // A corridor wall at y = -1 ending in a jamb at x = 5 (the wall
+        // behind the doorway 0.5 m deeper). From far along the corridor
+        // the beams meet the wall at a grazing angle, some 10 cm apart
+        // near the jamb; from near, 2–3 cm apart. The last point on the
+        // wall falls short of the jamb by up to one spacing; the end is
+        // put half a spacing beyond it, so the views agree on average.
+        let mut world = World::new();
+        world.add_wall([-2.0, -1.0], [5.0, -1.0]);
+        world.add_wall([5.0, -1.5], [9.0, -1.5]);
+        let end_seen_from = |x: f64, jitter: f64| {
+            let pose = Pose2::new(x + jitter, 0.0, 0.0);
+            let lines = lines_seen(&world, pose);
+            let wall = nearest(&lines, [3.0 - x - jitter, -1.0]);
+            assert!(
+                wall.wall_ends.end.is_some(),
+                "a jamb from x = {x}: {wall:?}"
+            );
+            x + jitter + wall.end[0]
+        };
+        for x in [1.4, 3.5] {
+            // The beam grid moves over the jamb with the robot: average
+            // over positions a spacing apart.
+            let n = 20;
+            let mean: f64 = (0..n)
+                .map(|k| end_seen_from(x, 0.005 * k as f64))
+                .sum::<f64>()
+                / n as f64;
+            assert!(
+                (mean - 5.0).abs() < 0.015,
+                "from x = {x}: the jamb at {mean}"
+            );
+        }
     }
 }

@@ -215,9 +215,26 @@ impl LineExtractor {
                 continue;
             };
             if line.length() >= cfg.min_length {
+                let start = wall_end(scan, mount, cfg, &points[span.first], &line, -1);
+                let end = wall_end(scan, mount, cfg, &points[span.last], &line, 1);
+                // A true end is placed where it lies on average, not at
+                // the last point on the wall (see `SeenEnd`).
+                let d = line.direction();
+                if let Some(e) = start {
+                    line.start = [
+                        line.start[0] - d[0] * e.beyond_last_point,
+                        line.start[1] - d[1] * e.beyond_last_point,
+                    ];
+                }
+                if let Some(e) = end {
+                    line.end = [
+                        line.end[0] + d[0] * e.beyond_last_point,
+                        line.end[1] + d[1] * e.beyond_last_point,
+                    ];
+                }
                 line.wall_ends = WallEnds {
-                    start: wall_end(scan, mount, cfg, &points[span.first], &line, -1),
-                    end: wall_end(scan, mount, cfg, &points[span.last], &line, 1),
+                    start: start.map(|e| e.sigma),
+                    end: end.map(|e| e.sigma),
                 };
                 out.push(line);
             }
@@ -323,9 +340,13 @@ mod tests {
             assert!(lines.len() >= 4, "pose {k}: {} lines", lines.len());
             for l in &lines {
                 let m = l.transformed(&robot);
+                // On a wall; a true end up to half a beam spacing past
+                // the last point, so possibly past the wall's corner.
+                let slack = |e: Option<f64>| if e.is_some() { 0.1 } else { 1e-3 };
                 let on_wall = world.walls().iter().any(|&w| {
-                    point_segment_distance(m.start, w[0], w[1]) < 1e-3
-                        && point_segment_distance(m.end, w[0], w[1]) < 1e-3
+                    point_segment_distance(m.start, w[0], w[1]) < slack(m.wall_ends.start)
+                        && point_segment_distance(m.end, w[0], w[1]) < slack(m.wall_ends.end)
+                        && point_segment_distance(m.centre(), w[0], w[1]) < 1e-3
                 });
                 assert!(on_wall, "pose {k}: {m:?} is on no wall");
                 let sensor = MOUNT.transform_point([0.0, 0.0]);
@@ -408,15 +429,21 @@ mod tests {
             let lines = extract_lines(&scan, &MOUNT, &cfg);
             let pts = scan_points(&scan, &MOUNT, &cfg);
             let tol = cfg.split_threshold.max(cfg.merge_threshold);
+            // A true end lies up to half a beam spacing beyond the last
+            // point, the spacing at most this far from the sensor.
+            let sensor = MOUNT.transform_point([0.0, 0.0]);
+            let reach = pts.iter().map(|p| (p[0] - sensor[0]).hypot(p[1] - sensor[1])).fold(0.0, f64::max);
+            let beyond = 0.5 * reach * scan.angle_increment.abs() / super::super::ends::MIN_SIN_INCIDENCE;
             for l in &lines {
                 prop_assert!((0.0..TAU).contains(&l.theta));
                 prop_assert!(l.n_points >= cfg.min_points);
                 prop_assert!(l.length() >= cfg.min_length);
                 prop_assert!(l.sigma_c >= 0.0 && l.sigma_theta >= 0.0);
-                // End points are projections of input points: each lies
-                // within the threshold of one.
-                for e in [l.start, l.end] {
-                    let near = pts.iter().any(|p| (p[0] - e[0]).hypot(p[1] - e[1]) <= tol);
+                // End points are projections of input points (true ends:
+                // moved on along the line by up to half a spacing).
+                for (e, true_end) in [(l.start, l.wall_ends.start), (l.end, l.wall_ends.end)] {
+                    let slack = tol + if true_end.is_some() { beyond } else { 0.0 };
+                    let near = pts.iter().any(|p| (p[0] - e[0]).hypot(p[1] - e[1]) <= slack);
                     prop_assert!(near, "{e:?} is far from every point");
                 }
             }

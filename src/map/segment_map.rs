@@ -124,8 +124,14 @@ pub fn blur_by_pose(line_robot: &CogLine, pose: &Pose2, cov: &[[f64; 3]; 3]) -> 
     line
 }
 
-/// Extremes of fused lines this close together (m) are the same end.
-const WALL_END_TOLERANCE: f64 = 0.05;
+/// Two positions of a wall end with combined σ `sigma` (m) are one end
+/// if this close: 3 σ, plus a little for the ends' own pose noise.
+fn same_end(sigma: f64) -> f64 {
+    3.0 * sigma + 0.02
+}
+/// Floor on a wall end's σ (m), as on a line's offset: many views of one
+/// end, from poses derived from this map, are not independent.
+const MIN_END_SIGMA: f64 = 0.01;
 
 /// Fuses two lines measured as the same wall (same direction sense) into
 /// one; see the module documentation. `None` if the directions cancel or a
@@ -162,28 +168,50 @@ pub fn fuse(a: &CogLine, b: &CogLine) -> Option<CogLine> {
     let centre = [r[0] - d * normal[0], r[1] - d * normal[1]];
 
     let along = |p: [f64; 2]| cs * (p[0] - centre[0]) + sn * (p[1] - centre[1]);
-    let ends = [a.start, a.end, b.start, b.end].map(along);
-    let s_min = ends.iter().copied().fold(f64::INFINITY, f64::min);
-    let s_max = ends.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    // A kept extreme is a true wall end if a line that reaches it (to the
-    // tolerance) saw a true end there; the surest such view sets its σ. A
-    // view reaching farther without an end there means the wall goes on.
-    let flags = [
-        a.wall_ends.start,
-        a.wall_ends.end,
-        b.wall_ends.start,
-        b.wall_ends.end,
-    ];
-    let end_at = |extreme: f64| {
-        ends.iter()
-            .zip(flags)
-            .filter(|(s, _)| (**s - extreme).abs() <= WALL_END_TOLERANCE)
-            .filter_map(|(_, f)| f)
-            .reduce(f64::min)
+    // One side of the fused line (`outward` +1 at the end, −1 at the
+    // start) from each line's extent there and whether it saw a true end.
+    // Two true ends that agree within their σ are one end, placed at
+    // their mean weighted by σ (each view put its end where it lies on
+    // average); a view reaching beyond a true end by more than its σ
+    // means the wall goes on (no end there); otherwise the true end holds.
+    let side = |outward: f64, (sa, fa): (f64, Option<f64>), (sb, fb): (f64, Option<f64>)| {
+        let farther = if outward * (sa - sb) >= 0.0 { sa } else { sb };
+        let beyond = |s: f64, end: f64, sigma: f64| outward * (s - end) > same_end(sigma);
+        match (fa, fb) {
+            (Some(ea), Some(eb)) if (sa - sb).abs() <= same_end(ea.hypot(eb)) => {
+                let (wa, wb) = (
+                    ea.max(MIN_END_SIGMA).powi(-2),
+                    eb.max(MIN_END_SIGMA).powi(-2),
+                );
+                let sigma = (wa + wb).recip().sqrt().max(MIN_END_SIGMA);
+                ((wa * sa + wb * sb) / (wa + wb), Some(sigma))
+            }
+            // Disagreeing ends: the farther view holds (as with no ends).
+            (Some(ea), Some(eb)) => {
+                if farther == sa {
+                    (sa, Some(ea))
+                } else {
+                    (sb, Some(eb))
+                }
+            }
+            (Some(ea), None) if !beyond(sb, sa, ea) => (sa, Some(ea)),
+            (None, Some(eb)) if !beyond(sa, sb, eb) => (sb, Some(eb)),
+            _ => (farther, None),
+        }
     };
+    let (s_min, start_end) = side(
+        -1.0,
+        (along(a.start), a.wall_ends.start),
+        (along(b.start), b.wall_ends.start),
+    );
+    let (s_max, end_end) = side(
+        1.0,
+        (along(a.end), a.wall_ends.end),
+        (along(b.end), b.wall_ends.end),
+    );
     let wall_ends = WallEnds {
-        start: end_at(s_min),
-        end: end_at(s_max),
+        start: start_end,
+        end: end_end,
     };
     let mut fused = CogLine::from_centre(
         theta,
@@ -579,5 +607,61 @@ mod tests {
         assert!(rebuilt.index().get(SegmentId(1)).is_none());
         let twice = [walls[0], walls[0]];
         assert!(SegmentMap::from_walls(SegmentMapConfig::default(), &twice).is_none());
+    }
+
+    /// A wall along x at y = 0 from `x0` to `x1`, with true ends as given.
+    fn ended(x0: f64, x1: f64, start: Option<f64>, end: Option<f64>) -> CogLine {
+        let mut l = wall(x0, x1, 0.0, 0.01, 0.01);
+        l.wall_ends = WallEnds { start, end };
+        l
+    }
+
+    #[test]
+    fn two_views_of_one_true_end_meet_at_their_weighted_mean() {
+        // The jamb at x = 4, seen at 3.98 (σ 2 cm) and at 4.06 (σ 4 cm).
+        let fused = fuse(
+            &ended(0.0, 3.98, None, Some(0.02)),
+            &ended(1.0, 4.06, None, Some(0.04)),
+        )
+        .unwrap();
+        let expected = (3.98 / 0.02f64.powi(2) + 4.06 / 0.04f64.powi(2))
+            / (1.0 / 0.02f64.powi(2) + 1.0 / 0.04f64.powi(2));
+        assert!((fused.end[0] - expected).abs() < 1e-9, "{fused:?}");
+        let sigma = fused.wall_ends.end.unwrap();
+        assert!((MIN_END_SIGMA..0.02).contains(&sigma), "σ {sigma}");
+        // No end seen at the start: the extent there is the union's.
+        assert!(fused.wall_ends.start.is_none());
+        assert!(fused.start[0].abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_view_reaching_past_a_true_end_means_the_wall_goes_on() {
+        let fused = fuse(
+            &ended(0.0, 4.0, None, Some(0.02)),
+            &ended(1.0, 5.0, None, None),
+        )
+        .unwrap();
+        assert!(fused.wall_ends.end.is_none(), "{fused:?}");
+        assert!((fused.end[0] - 5.0).abs() < 1e-9);
+        // A view stopping short of the end (without one) leaves it.
+        let fused = fuse(
+            &ended(0.0, 4.0, None, Some(0.02)),
+            &ended(1.0, 3.5, None, None),
+        )
+        .unwrap();
+        assert_eq!(fused.wall_ends.end, Some(0.02));
+        assert!((fused.end[0] - 4.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn true_ends_that_disagree_are_not_averaged() {
+        // 30 cm apart with σ of 2 cm: not one end; the farther view holds.
+        let fused = fuse(
+            &ended(0.0, 4.0, None, Some(0.02)),
+            &ended(1.0, 4.3, None, Some(0.02)),
+        )
+        .unwrap();
+        assert!((fused.end[0] - 4.3).abs() < 1e-9, "{fused:?}");
+        assert_eq!(fused.wall_ends.end, Some(0.02));
     }
 }
