@@ -160,12 +160,14 @@ pub enum DemoStop {
 
 /// Runs `config` (the demo's, or a variation of it) with its maps written
 /// to `out_dir`, until exploration completes, its time limit passes or, as
-/// `stop` says, Ctrl-C is pressed.
+/// `stop` says, Ctrl-C is pressed. With `[web]` on, `on_web` hears the
+/// live view's address (a free port when the configured one is taken).
 pub fn run_demo(
     config: DaemonConfig,
     out_dir: &Path,
     stop: DemoStop,
     mut on_progress: impl FnMut(&DemoProgress),
+    on_web: impl FnMut(std::net::SocketAddr),
 ) -> Result<DemoSummary, DemoError> {
     let world = load_world(&config.sim.world)?;
     let score = std::rc::Rc::new(std::cell::RefCell::new(Score::default()));
@@ -181,6 +183,8 @@ pub fn run_demo(
         }
     });
     hooks.out_dir = Some(out_dir.to_owned());
+    hooks.web_any_port = true;
+    hooks.on_web = Some(Box::new(on_web));
     hooks.on_scan = Some(Box::new(move |p: &ScanProgress| {
         let mut s = hook_score.borrow_mut();
         if let Some(truth) = p.truth {

@@ -17,7 +17,7 @@ fn the_demo_world_is_explored_to_completion_through_the_pty() {
     let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
         .join(format!("demo-{}", std::process::id()));
     let mut reports = 0u64;
-    let summary = run_demo(config, &out, DemoStop::TimeLimit, |_| reports += 1).unwrap();
+    let summary = run_demo(config, &out, DemoStop::TimeLimit, |_| reports += 1, |_| {}).unwrap();
     println!("{}", serde_json::to_string_pretty(&summary).unwrap());
     assert_eq!(
         summary.reason,
@@ -60,6 +60,7 @@ fn a_rescued_map_is_whole_and_kept_in_the_state_directory() {
     config.daemon.checkpoint_interval = 1.0;
     config.daemon.state_dir = Some(dir.join("state"));
     config.exploration.exit_when_complete = false;
+    config.web.bind = "127.0.0.1:0".into();
     let run_dir = dir.join("state").join("run");
     let blocked = run_dir.join("map.json");
     let mut hooks = clsmap::daemon::Hooks::until(std::future::pending());
@@ -94,4 +95,203 @@ fn a_rescued_map_is_whole_and_kept_in_the_state_directory() {
     assert_eq!(poses, summary.scans, "every pose of the run in the rescue");
     clsmap::map::file::load(&rescue.join("map.json")).unwrap();
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// One HTTP/1.1 request on a new connection; the status and the body.
+fn http(address: std::net::SocketAddr, request: &str) -> (u16, String) {
+    use std::io::{Read, Write};
+    let mut stream = std::net::TcpStream::connect(address).unwrap();
+    stream
+        .set_read_timeout(Some(std::time::Duration::from_secs(10)))
+        .unwrap();
+    stream.write_all(request.as_bytes()).unwrap();
+    let mut reply = Vec::new();
+    stream.read_to_end(&mut reply).unwrap();
+    let reply = String::from_utf8_lossy(&reply).into_owned();
+    let status = reply
+        .split_whitespace()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
+    let body = reply
+        .split_once("\r\n\r\n")
+        .map(|(_, b)| b.to_string())
+        .unwrap_or_default();
+    (status, body)
+}
+
+fn get(address: std::net::SocketAddr, path: &str) -> (u16, String) {
+    http(
+        address,
+        &format!("GET {path} HTTP/1.1\r\nHost: clsmap\r\nConnection: close\r\n\r\n"),
+    )
+}
+
+fn post(address: std::net::SocketAddr, path: &str, token: Option<&str>) -> u16 {
+    let auth = token.map_or(String::new(), |t| format!("Authorization: Bearer {t}\r\n"));
+    http(
+        address,
+        &format!(
+            "POST {path} HTTP/1.1\r\nHost: clsmap\r\n{auth}Content-Length: 0\r\nConnection: close\r\n\r\n"
+        ),
+    )
+    .0
+}
+
+/// The live view of a running daemon: JSON endpoints for scripts, the
+/// client limit, control only with the token, and the page in a real
+/// headless browser (Debian's chromium; CI installs it).
+#[test]
+#[ignore = "real time and a browser; CI runs it: cargo test --test demo -- --ignored"]
+fn the_live_view_serves_the_running_daemon_to_scripts_and_a_browser() {
+    use std::io::{Read, Write};
+    const TOKEN: &str = "a-test-token-of-some-length";
+    let mut config = demo_config().unwrap();
+    config.web.bind = "127.0.0.1:0".into();
+    config.web.token = Some(TOKEN.into());
+    config.web.max_clients = 3;
+    config.daemon.max_run_time = 60.0;
+    let dir = std::env::temp_dir().join(format!("clsmap-web-{}", std::process::id()));
+    let (address_tx, address_rx) = std::sync::mpsc::channel();
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let out = dir.clone();
+    let daemon = std::thread::spawn(move || {
+        let mut hooks = clsmap::daemon::Hooks::until(async move {
+            let _ = stop_rx.await;
+        });
+        hooks.out_dir = Some(out);
+        hooks.on_web = Some(Box::new(move |a| {
+            let _ = address_tx.send(a);
+        }));
+        clsmap::daemon::run_blocking(config, hooks).unwrap()
+    });
+    let address = address_rx
+        .recv_timeout(std::time::Duration::from_secs(30))
+        .unwrap();
+
+    // Scripts: the status once the loop is mapping.
+    let started = std::time::Instant::now();
+    let status = loop {
+        let (code, body) = get(address, "/api/status");
+        if code == 200 {
+            let v: serde_json::Value = serde_json::from_str(&body).unwrap();
+            if v["status"]["scans"].as_u64().unwrap_or(0) > 100 {
+                break v;
+            }
+        }
+        assert!(started.elapsed().as_secs() < 30, "no status: {code} {body}");
+        std::thread::sleep(std::time::Duration::from_millis(200));
+    };
+    assert_eq!(status["sensor"], "streaming", "{status}");
+    assert_eq!(status["control"], true);
+    let (code, geometry) = get(address, "/api/geometry");
+    assert_eq!(code, 200);
+    let geometry: serde_json::Value = serde_json::from_str(&geometry).unwrap();
+    assert!(
+        geometry["walls"].as_array().unwrap().len() > 5,
+        "{geometry}"
+    );
+    let (code, trajectory) = get(address, "/api/trajectory");
+    assert_eq!(code, 200);
+    let trajectory: serde_json::Value = serde_json::from_str(&trajectory).unwrap();
+    assert!(!trajectory.as_array().unwrap().is_empty());
+    // /api/map is the map file itself.
+    let (code, map) = get(address, "/api/map");
+    assert_eq!(code, 200);
+    let loaded = clsmap::map::file::decode(&map).unwrap();
+    assert_eq!(loaded.version, 2);
+    assert!(loaded.contents.cls.actual_segments().count() > 5);
+
+    // Control only with the token.
+    assert_eq!(post(address, "/api/control/pause", None), 401);
+    assert_eq!(
+        post(
+            address,
+            "/api/control/pause",
+            Some("wrong-token-wrong-token")
+        ),
+        401
+    );
+    assert_eq!(post(address, "/api/control/pause", Some(TOKEN)), 202);
+    let started = std::time::Instant::now();
+    loop {
+        let (_, body) = get(address, "/api/status");
+        let v: serde_json::Value = serde_json::from_str(&body).unwrap_or_default();
+        if v["paused"] == true && v["command"] == serde_json::json!([0.0, 0.0, 0.0]) {
+            break;
+        }
+        assert!(started.elapsed().as_secs() < 10, "not paused: {body}");
+        std::thread::sleep(std::time::Duration::from_millis(200));
+    }
+    assert_eq!(post(address, "/api/control/resume", Some(TOKEN)), 202);
+
+    // Three streams that never read take every client slot: the next
+    // request is refused, not queued, and the loop goes on meanwhile.
+    let streams: Vec<_> = (0..3)
+        .map(|_| {
+            let mut s = std::net::TcpStream::connect(address).unwrap();
+            s.write_all(b"GET /api/events HTTP/1.1\r\nHost: clsmap\r\n\r\n")
+                .unwrap();
+            let mut head = [0u8; 12];
+            s.read_exact(&mut head).unwrap();
+            assert_eq!(&head, b"HTTP/1.1 200");
+            s
+        })
+        .collect();
+    let scans_before = status["status"]["scans"].as_u64().unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    assert_eq!(get(address, "/api/status").0, 503);
+    drop(streams);
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let (code, body) = get(address, "/api/status");
+    assert_eq!(code, 200);
+    let v: serde_json::Value = serde_json::from_str(&body).unwrap();
+    assert!(
+        v["status"]["scans"].as_u64().unwrap() > scans_before + 30,
+        "{v}"
+    );
+
+    // The page in a real browser: it draws the walls and the panel.
+    let chromium = ["/usr/bin/chromium", "/usr/bin/chromium-browser"]
+        .into_iter()
+        .find(|p| std::path::Path::new(p).exists())
+        .expect("the browser test needs Debian's chromium (apt-get install chromium)");
+    let profile = dir.join("chromium-profile");
+    let browser_started = std::time::Instant::now();
+    let dom = std::process::Command::new(chromium)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--dump-dom",
+        ])
+        .arg(format!("--user-data-dir={}", profile.display()))
+        .arg(format!("http://{address}/"))
+        .output()
+        .unwrap();
+    eprintln!(
+        "the browser took {:.1} s",
+        browser_started.elapsed().as_secs_f64()
+    );
+    let dom = String::from_utf8_lossy(&dom.stdout);
+    let walls = dom.matches("class=\"wall\"").count();
+    assert!(walls > 5, "the page drew {walls} walls:\n{dom}");
+    assert!(
+        dom.contains(">streaming<"),
+        "no sensor state on the page:\n{dom}"
+    );
+    assert!(
+        dom.contains(">localized<"),
+        "no localization state on the page"
+    );
+
+    let _ = stop_tx.send(());
+    let summary = daemon.join().unwrap();
+    assert_eq!(summary.reason, StopReason::Shutdown);
+    let _ = std::fs::remove_dir_all(&dir);
 }

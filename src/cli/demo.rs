@@ -24,6 +24,7 @@ pub fn demo(
     out: Option<&Path>,
     world: Option<&str>,
     seed: Option<u64>,
+    web: bool,
 ) -> anyhow::Result<ExitCode> {
     let out = out.map_or_else(default_out, Path::to_path_buf);
     let out = out.as_path();
@@ -34,6 +35,7 @@ pub fn demo(
     if let Some(s) = seed {
         config.sim.seed = s;
     }
+    config.web.enabled = web;
     if out.join(clsmap::pipeline::MAP_FILE).exists() {
         bail!(
             "{} already holds a map; choose another --out (the demo never overwrites a map)",
@@ -57,7 +59,12 @@ pub fn demo(
             p.scans, p.walls, p.frontiers, p.goals, p.error
         ));
     };
-    let result = run_demo(config, out, DemoStop::CtrlC, on_progress);
+    let on_web = |address: std::net::SocketAddr| {
+        bar.suspend(|| {
+            println!("live view: http://{address}/ (served until the exploration ends)");
+        });
+    };
+    let result = run_demo(config, out, DemoStop::CtrlC, on_progress, on_web);
     bar.finish_and_clear();
     let s = result.context("the demo failed")?;
     println!(

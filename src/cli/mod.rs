@@ -17,6 +17,7 @@ mod emulate;
 mod localize;
 mod mapping;
 mod sensor;
+mod view;
 
 /// SICK LMS200 driver and Closed Line Segment mapper.
 #[derive(Debug, Parser)]
@@ -53,6 +54,10 @@ enum Command {
         /// Seed of the simulated range noise.
         #[arg(long)]
         seed: Option<u64>,
+        /// Do not serve the live view (served by default on
+        /// 127.0.0.1:8080, or a free port when that one is taken).
+        #[arg(long)]
+        no_web: bool,
     },
     /// The robot daemon: the LMS200, the base, localization, the CLS map
     /// and exploration in one real-time loop (systemd `Type=notify`).
@@ -179,6 +184,16 @@ enum Command {
         #[arg(long, default_value_t = 0.05)]
         resolution: f64,
     },
+    /// Show a saved map (map.json) in the browser, through the live view
+    /// the daemon serves, until Ctrl-C.
+    View {
+        /// Map written by `clsmap map`, `clsmap run` or `clsmap demo`.
+        map: PathBuf,
+        /// Address and port to listen on (another address than 127.0.0.1
+        /// shows the map to whoever reaches it).
+        #[arg(long, default_value = "127.0.0.1:8080")]
+        bind: String,
+    },
     /// Global localization: for each scan of a log, where in the map the
     /// robot may be, as one JSON line of ranked hypotheses (map frame).
     Localize {
@@ -277,7 +292,12 @@ fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         #[cfg(feature = "sim")]
-        Command::Demo { out, world, seed } => demo::demo(out.as_deref(), world.as_deref(), seed),
+        Command::Demo {
+            out,
+            world,
+            seed,
+            no_web,
+        } => demo::demo(out.as_deref(), world.as_deref(), seed, !no_web),
         Command::Run { config, map, mode } => daemon::run_daemon(&config, map, mode),
         Command::Probe { port } => sensor::probe(&port),
         Command::Record {
@@ -351,5 +371,6 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             output,
             resolution,
         } => mapping::render(&map, &output, resolution),
+        Command::View { map, bind } => view::view(&map, &bind),
     }
 }

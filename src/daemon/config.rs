@@ -27,7 +27,49 @@ pub struct DaemonConfig {
     pub exploration: ExplorationSection,
     pub daemon: LoopConfig,
     pub map: MapSection,
+    pub web: WebSection,
     pub mapper: MapperConfig,
+}
+
+/// `[web]`: the live view in a browser, served by the daemon.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WebSection {
+    /// Serve the live view (default false on a robot; `clsmap demo` turns
+    /// it on).
+    pub enabled: bool,
+    /// Address and port to listen on. Default `"127.0.0.1:8080"`, this
+    /// machine only; another address (`"0.0.0.0:8080"`: every network the
+    /// robot is on) shows the robot's map and pose to whoever reaches it.
+    pub bind: String,
+    /// Pause, resume and stop the base from the page, only with this token
+    /// (sent as `Authorization: Bearer …`; at least 16 characters).
+    /// Default: none, and then nothing on the page changes anything.
+    pub token: Option<String>,
+    /// Requests served at once, live streams included (default 8); more
+    /// are refused (503) rather than queued.
+    pub max_clients: usize,
+    /// Updates pushed to the page per second (default 2).
+    pub rate: f64,
+}
+
+impl Default for WebSection {
+    fn default() -> Self {
+        WebSection {
+            enabled: false,
+            bind: "127.0.0.1:8080".into(),
+            token: None,
+            max_clients: 8,
+            rate: 2.0,
+        }
+    }
+}
+
+impl WebSection {
+    /// The bind address, once checked by [`DaemonConfig::validate`].
+    pub fn address(&self) -> Option<std::net::SocketAddr> {
+        self.bind.parse().ok()
+    }
 }
 
 /// `[map]`: start from a saved map instead of a new one.
@@ -406,6 +448,32 @@ impl DaemonConfig {
         if b.baud == 0 {
             return Err(range("base.baud", "0".into(), "> 0"));
         }
+        let w = &self.web;
+        if w.address().is_none() {
+            return Err(DaemonConfigError::Invalid {
+                key: "web.bind".into(),
+                line: locate("web.bind"),
+                reason: format!(
+                    "{:?} is not an address and port such as \"127.0.0.1:8080\"",
+                    w.bind
+                ),
+            });
+        }
+        if w.token.as_ref().is_some_and(|t| t.chars().count() < 16) {
+            return Err(range(
+                "web.token",
+                "(hidden)".into(),
+                "at least 16 characters",
+            ));
+        }
+        if !(1..=256).contains(&w.max_clients) {
+            return Err(range(
+                "web.max_clients",
+                w.max_clients.to_string(),
+                "in [1, 256]",
+            ));
+        }
+        within("web.rate", w.rate, 0.1, 10.0)?;
         let host_port = b.address.rsplit_once(':').is_some_and(|(host, port)| {
             !host.is_empty() && port.parse::<u16>().is_ok_and(|p| p > 0)
         });
@@ -614,6 +682,27 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("line 2"), "{e}");
+    }
+
+    #[test]
+    fn web_settings_are_checked_with_their_line() {
+        let e = DaemonConfig::from_toml("[web]\nenabled = true\nbind = \"localhost\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("web.bind (line 3)"), "{e}");
+        let e = DaemonConfig::from_toml("[web]\ntoken = \"short\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("web.token (line 2)") && !e.contains("short"),
+            "{e}"
+        );
+        let e = DaemonConfig::from_toml("[web]\nmax_clients = 0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("web.max_clients (line 2)"), "{e}");
+        let c = DaemonConfig::from_toml("[web]\nbind = \"0.0.0.0:9000\"\n").unwrap();
+        assert_eq!(c.web.address().unwrap().port(), 9000);
     }
 
     /// A base link that cannot work is refused at load, with its line,

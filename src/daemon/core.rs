@@ -24,6 +24,7 @@ use super::base_driver::BaseDriver;
 use super::checkpoint::{Checkpoint, CheckpointFailed};
 use super::config::DaemonConfig;
 use super::live::{LiveMapper, LiveStatus};
+use super::web::{ControlCommand, LiveView, MapView};
 use crate::graph::{OptimisationJob, OptimisationResult};
 use crate::input::lms200::range_scan;
 use crate::pipeline::{MapSearch, PipelineError, ScanOutcome};
@@ -80,7 +81,13 @@ struct Timers {
     status: Timer,
     /// A map checkpoint; `None` when `checkpoint_interval` is 0.
     checkpoint: Option<Timer>,
+    /// A snapshot for the live view; `None` when `[web]` is off.
+    view: Option<Timer>,
 }
+
+/// Seconds between map snapshots for the live view at most: a snapshot
+/// copies the map, which grows with the building.
+const MAP_VIEW_EVERY: f64 = 1.0;
 
 /// The daemon's loop, sans-IO; see the module doc.
 #[derive(Debug)]
@@ -105,6 +112,28 @@ pub struct Core {
     checkpoint_in_flight: bool,
     optimisation_in_flight: bool,
     stop: Option<StopReason>,
+    /// Exploration held from the live view.
+    paused: bool,
+    view_due: Option<LiveView>,
+    map_view_due: Option<MapView>,
+    /// What the last map snapshot was taken of, its version, and when.
+    map_key: Option<MapKey>,
+    map_version: u64,
+    last_map_view: f64,
+    scans_at_last_view: u64,
+    last_view_t: f64,
+    /// Optimisations taken in so far (each moves the whole map).
+    optimisations: u64,
+}
+
+/// What makes the map look different: counts that change with it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct MapKey {
+    keyframes: usize,
+    walls: usize,
+    frontiers: usize,
+    loops: usize,
+    optimisations: u64,
 }
 
 impl Core {
@@ -118,6 +147,10 @@ impl Core {
                 let every = daemon.checkpoint_interval.max(1.0);
                 Timer::new(every, every)
             }),
+            view: config
+                .web
+                .enabled
+                .then(|| Timer::new(0.0, 1.0 / config.web.rate)),
         };
         Core {
             mode: config.link().measuring_mode,
@@ -139,6 +172,15 @@ impl Core {
             checkpoint_in_flight: false,
             optimisation_in_flight: false,
             stop: None,
+            paused: false,
+            view_due: None,
+            map_view_due: None,
+            map_key: None,
+            map_version: 0,
+            last_map_view: f64::NEG_INFINITY,
+            scans_at_last_view: 0,
+            last_view_t: 0.0,
+            optimisations: 0,
         }
     }
 
@@ -223,6 +265,96 @@ impl Core {
         {
             self.checkpoint_due = true;
         }
+        if let Some(timer) = self.timers.view.as_mut()
+            && timer.fire(now)
+        {
+            self.take_views(now);
+        }
+    }
+
+    /// The page asked for something (with the token).
+    pub fn handle_control(&mut self, command: ControlCommand, now: f64) {
+        match command {
+            ControlCommand::Pause => {
+                warn!("exploration paused from the live view; the base stops");
+                self.paused = true;
+                self.base.halt(now);
+            }
+            ControlCommand::Resume => {
+                info!("exploration resumed from the live view");
+                self.paused = false;
+            }
+            ControlCommand::Stop => {
+                warn!("STOP from the live view: the base stops, exploration is held");
+                self.paused = true;
+                self.base.stop(now);
+            }
+        }
+    }
+
+    fn sensor_state(&self, now: f64) -> String {
+        match (&self.sensor_trouble, self.sensor_ok(now)) {
+            (_, true) => "streaming".to_string(),
+            (Some(why), false) => format!("SENSOR FAILING ({why})"),
+            (None, false) if self.last_scan_at.is_none() => "waiting for the sensor".to_string(),
+            (None, false) => "SENSOR SILENT".to_string(),
+        }
+    }
+
+    /// Snapshots for the live view: the panel's every time, the map's when
+    /// it changed (at most every [`MAP_VIEW_EVERY`]).
+    fn take_views(&mut self, now: f64) {
+        let status = self.live.status();
+        let key = MapKey {
+            keyframes: status.keyframes,
+            walls: status.walls,
+            frontiers: status.frontiers,
+            loops: status.loops_closed,
+            optimisations: self.optimisations,
+        };
+        if self.map_key != Some(key) && now - self.last_map_view >= MAP_VIEW_EVERY {
+            self.map_key = Some(key);
+            self.map_version += 1;
+            self.last_map_view = now;
+            let contents = std::sync::Arc::new(self.live.mapper().contents());
+            let path = self.live.picture_path().copied();
+            self.map_view_due = Some(MapView::from_contents(self.map_version, contents, path));
+        }
+        let rate =
+            (status.scans - self.scans_at_last_view) as f64 / (now - self.last_view_t).max(1e-3);
+        self.scans_at_last_view = status.scans;
+        self.last_view_t = now;
+        let explorer = self.live.explorer();
+        let command = self.base.last_command();
+        self.view_due = Some(LiveView {
+            uptime: now,
+            sensor: self.sensor_state(now),
+            scan_rate: rate,
+            scans_skipped: self.skipped,
+            odometry_refused: self.base.odometry_refused(),
+            base_ok: self.base.can_drive(now, self.live.last_odometry_time()),
+            command: [command.vx, command.vy, command.omega],
+            covariance: self.live.mapper().last_covariance(),
+            goal: explorer.and_then(|e| e.goal()),
+            plan: explorer
+                .map(|e| e.planned_path().to_vec())
+                .unwrap_or_default(),
+            paused: self.paused,
+            control: self.config.web.token.is_some(),
+            latencies: self.live.latencies().summaries(),
+            map_version: self.map_version,
+            status,
+        });
+    }
+
+    /// A snapshot of the loop for the live view's panel.
+    pub fn poll_view(&mut self) -> Option<LiveView> {
+        self.view_due.take()
+    }
+
+    /// A snapshot of the map for the live view, when it changed.
+    pub fn poll_map_view(&mut self) -> Option<MapView> {
+        self.map_view_due.take()
     }
 
     fn ready(&mut self) {
@@ -254,8 +386,15 @@ impl Core {
             );
             self.silence_logged = true;
         }
-        // A robot not (or no longer) found in a loaded map does not drive.
+        // A robot not (or no longer) found in a loaded map does not drive;
+        // one paused from the live view is held.
         let placed = self.live.mapper().map_search().is_none();
+        let manual = if self.paused {
+            self.live.hold_exploration(now);
+            Some(Twist::ZERO)
+        } else {
+            manual
+        };
         self.base
             .control(&mut self.live, sensor_ok && placed, now, manual);
         if self.stop.is_none() {
@@ -275,12 +414,7 @@ impl Core {
             / (now - self.last_status_t).max(1e-3);
         self.scans_at_last_status = status.scans;
         self.last_status_t = now;
-        let sensor = match (&self.sensor_trouble, self.sensor_ok(now)) {
-            (_, true) => "streaming".to_string(),
-            (Some(why), false) => format!("SENSOR FAILING ({why})"),
-            (None, false) if self.last_scan_at.is_none() => "waiting for the sensor".to_string(),
-            (None, false) => "SENSOR SILENT".to_string(),
-        };
+        let sensor = self.sensor_state(now);
         let line = status_line(&status, rate, &sensor);
         info!(skipped = self.skipped, "{line}");
         let latency = self.live.latencies().line();
@@ -360,7 +494,10 @@ impl Core {
     pub fn handle_optimisation_done(&mut self, result: Option<OptimisationResult>) {
         self.optimisation_in_flight = false;
         match result {
-            Some(result) => self.live.apply_optimisation(result),
+            Some(result) => {
+                self.optimisations += 1;
+                self.live.apply_optimisation(result);
+            }
             None => self.live.abandon_optimisation(),
         }
     }

@@ -269,6 +269,11 @@ impl LiveMapper {
         outcome
     }
 
+    /// The path drawn on the map's picture (map frame), oldest first.
+    pub fn picture_path(&self) -> impl Iterator<Item = &Pose2> + '_ {
+        self.picture_path.iter()
+    }
+
     /// The robot's pose (map frame) now: the last scan's pose moved on by
     /// the odometry since it, when there is odometry for both times.
     pub fn pose_now(&self) -> Option<Pose2> {

@@ -26,6 +26,7 @@ pub mod runtime;
 pub mod sensor;
 #[cfg(feature = "sim")]
 pub mod simulation;
+pub mod web;
 
 pub use config::{BaseKind, DaemonConfig, DaemonConfigError, SensorSource};
 pub use latency::{Latencies, Stage, StageSummary};

@@ -68,6 +68,8 @@ pub enum DaemonError {
     Runtime(#[source] std::io::Error),
     #[error("the map could not be saved anywhere; tried {tried}")]
     Save { tried: String },
+    #[error(transparent)]
+    Web(#[from] super::web::server::WebError),
     #[error("cannot start from the map {path} (on_bad_map = \"refuse\")")]
     Map {
         path: PathBuf,
@@ -125,6 +127,11 @@ pub struct Hooks<'a> {
     pub out_dir: Option<PathBuf>,
     /// Called after every scan.
     pub on_scan: Option<ScanHook<'a>>,
+    /// Called with the live view's address once it listens.
+    pub on_web: Option<Box<dyn FnMut(std::net::SocketAddr) + 'a>>,
+    /// When `[web] bind`'s port is taken, listen on a free port of the
+    /// same address instead of refusing to start (the demo).
+    pub web_any_port: bool,
 }
 
 impl std::fmt::Debug for Hooks<'_> {
@@ -145,6 +152,8 @@ impl<'a> Hooks<'a> {
             config_path: None,
             out_dir: None,
             on_scan: None,
+            on_web: None,
+            web_any_port: false,
         }
     }
 }
@@ -365,17 +374,29 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
         config.sensor.retry_initial,
         config.sensor.retry_max,
     );
-    let mut core = Core::new(config, live, base);
-    let mut last_seq = 0;
-    let mut writing: Option<JoinHandle<Result<(), CheckpointFailed>>> = None;
-    let mut optimising: Option<JoinHandle<OptimisationResult>> = None;
     let Hooks {
         shutdown: mut shutdown_signal,
         mut reload,
         config_path,
         mut on_scan,
+        mut on_web,
+        web_any_port,
         ..
     } = hooks;
+    let web = start_web(&config, web_any_port)?;
+    let (_web_server, mut web_feed) = match web {
+        Some((server, feed)) => {
+            if let Some(hook) = on_web.as_mut() {
+                hook(server.address());
+            }
+            (Some(server), Some(feed))
+        }
+        None => (None, None),
+    };
+    let mut core = Core::new(config, live, base);
+    let mut last_seq = 0;
+    let mut writing: Option<JoinHandle<Result<(), CheckpointFailed>>> = None;
+    let mut optimising: Option<JoinHandle<OptimisationResult>> = None;
     let reason = loop {
         let wake = t0 + Duration::try_from_secs_f64(core.poll_timeout()).unwrap_or(Duration::MAX);
         tokio::select! {
@@ -423,6 +444,12 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
                 core.handle_optimisation_done(result.ok());
             }
             Some(report) = report_rx.recv() => on_report(&mut core, &report),
+            Some(command) = async {
+                match web_feed.as_mut() {
+                    Some(feed) => feed.control.recv().await,
+                    None => std::future::pending().await,
+                }
+            } => core.handle_control(command, clock()),
             () = tokio::time::sleep_until(wake.into()) => {
                 core.handle_tick(clock(), None);
                 notifier.loop_alive(Instant::now());
@@ -442,6 +469,14 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
         }
         if let Some(line) = core.poll_status() {
             notifier.status(&line);
+        }
+        if let Some(feed) = &web_feed {
+            if let Some(map) = core.poll_map_view() {
+                feed.map.send_replace(Some(std::sync::Arc::new(map)));
+            }
+            if let Some(view) = core.poll_view() {
+                feed.view.send_replace(Some(std::sync::Arc::new(view)));
+            }
         }
         if core.poll_checkpoint() {
             writing = start_checkpoint(&mut core, &mut dirs);
@@ -498,6 +533,38 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
         first_scan_after: core.first_scan_after(),
         run_time: clock(),
     })
+}
+
+/// The live view's server, when `[web]` asks for it; with `any_port` a
+/// taken port gives way to a free one on the same address.
+fn start_web(
+    config: &DaemonConfig,
+    any_port: bool,
+) -> Result<Option<(super::web::server::WebServer, super::web::server::WebFeed)>, DaemonError> {
+    use super::web::server::{WebError, WebOptions, serve};
+    if !config.web.enabled {
+        return Ok(None);
+    }
+    let Some(address) = config.web.address() else {
+        return Ok(None);
+    };
+    let options = WebOptions {
+        address,
+        token: config.web.token.clone(),
+        max_clients: config.web.max_clients,
+    };
+    match serve(options.clone()) {
+        Ok(served) => Ok(Some(served)),
+        Err(WebError::Bind { source, .. })
+            if any_port && source.kind() == std::io::ErrorKind::AddrInUse =>
+        {
+            warn!(%address, "the live view's port is taken; using a free one");
+            let mut elsewhere = options;
+            elsewhere.address.set_port(0);
+            Ok(Some(serve(elsewhere)?))
+        }
+        Err(e) => Err(e.into()),
+    }
 }
 
 /// Starts writing a checkpoint on a blocking thread.

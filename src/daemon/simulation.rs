@@ -135,6 +135,8 @@ impl VirtualRobot {
         let t0 = Instant::now();
         let mut config = config.clone();
         config.sensor.source = SensorSource::Emulator;
+        // No one to show a live view to.
+        config.web.enabled = false;
         let (robot, world) = simulated_robot(&config)?;
         let emulator = emulated_sensor(&config, &world, &robot, t0);
         let link = config.link();

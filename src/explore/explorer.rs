@@ -117,6 +117,14 @@ impl Explorer {
         }
     }
 
+    /// The path planned to the current goal (map frame, m), if driving.
+    pub fn planned_path(&self) -> &[[f64; 2]] {
+        match &self.state {
+            State::Driving { follower, .. } => follower.path(),
+            _ => &[],
+        }
+    }
+
     /// Frontiers given up on when exploration completed.
     pub fn given_up(&self) -> &[Frontier] {
         match &self.state {

@@ -139,6 +139,11 @@ impl PathFollower {
         self.goal
     }
 
+    /// The planned path's points (map frame, m), the goal last.
+    pub fn path(&self) -> &[[f64; 2]] {
+        &self.path
+    }
+
     /// Length (m) of the path still ahead of `pose`.
     pub fn remaining(&self, pose: &Pose2) -> f64 {
         let mut from = [pose.x, pose.y];

@@ -82,6 +82,8 @@ pub struct Mapper {
     /// that runs once there are [`LOST_AFTER_SCANS`].
     lost_scans: usize,
     relocalizer: Option<StartSearch>,
+    /// The last scan's pose covariance (x, y, θ; m², m·rad, rad²).
+    last_covariance: [[f64; 3]; 3],
     pub(super) summary: MappingSummary,
     clocks: StageClocks,
 }
@@ -119,6 +121,7 @@ impl Mapper {
             first_session_keyframe: false,
             lost_scans: 0,
             relocalizer: None,
+            last_covariance: [[0.0; 3]; 3],
             summary: MappingSummary::default(),
             clocks: StageClocks::default(),
         }
@@ -179,6 +182,11 @@ impl Mapper {
     /// The Closed Line Segment map grown so far (with its rebuild deferred,
     /// see [`defer_cls_rebuild`](Self::defer_cls_rebuild), empty or out of
     /// date until [`finish`](Self::finish)).
+    /// The last scan's pose covariance (x, y, θ; m², m·rad, rad²).
+    pub fn last_covariance(&self) -> [[f64; 3]; 3] {
+        self.last_covariance
+    }
+
     pub fn cls_map(&self) -> &ClsMap {
         &self.cls
     }
@@ -752,6 +760,7 @@ impl Mapper {
         }
 
         self.predictor.record(outcome.pose, cov, outcome.localized);
+        self.last_covariance = cov;
         if relocated {
             // The step to here is the jump, not motion to extrapolate.
             self.predictor.jumped();

@@ -88,6 +88,11 @@ fn demo_run_config(dir: &TempDir, extra: &str) -> PathBuf {
             .replace("exit_when_complete = true", "exit_when_complete = false")
             .replace("checkpoint_interval = 30.0", "checkpoint_interval = 1.0")
             .replace("status_interval = 5.0", "status_interval = 1.0")
+            // Tests run side by side: the live view on a free port.
+            .replace(
+                "[web]\nenabled = true",
+                "[web]\nenabled = true\nbind = \"127.0.0.1:0\"",
+            )
             .replace(
                 "[daemon]",
                 &format!(

@@ -135,3 +135,54 @@ fn render_draws_the_map_as_svg_and_exports_an_occupancy_grid() {
     assert!(yaml.contains("image: grid.pgm"), "{yaml}");
     assert!(yaml.contains("resolution: 0.05"), "{yaml}");
 }
+
+#[test]
+fn view_serves_a_saved_map_over_http_until_ctrl_c() {
+    use std::io::{Read, Write};
+    let dir = TempDir::new("view");
+    let out = dir.join("out");
+    map(&fixture(CSAIL_FIXTURE), &out, &[]).succeeded();
+    let map_json = out.join("map.json");
+    let mut child = clsmap_command()
+        .args(["view", arg(&map_json), "--bind", "127.0.0.1:0"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdout = BufReader::new(child.stdout.take().unwrap());
+    let mut line = String::new();
+    stdout.read_line(&mut line).unwrap();
+    // "…/map.json: http://127.0.0.1:PORT/ (Ctrl-C stops)"
+    let address = line
+        .split("http://")
+        .nth(1)
+        .and_then(|rest| rest.split('/').next())
+        .unwrap_or_else(|| panic!("no address in {line:?}"))
+        .to_string();
+    let mut stream = std::net::TcpStream::connect(&address).unwrap();
+    stream
+        .write_all(b"GET /api/geometry HTTP/1.1\r\nHost: clsmap\r\nConnection: close\r\n\r\n")
+        .unwrap();
+    let mut reply = String::new();
+    stream.read_to_string(&mut reply).unwrap();
+    assert!(reply.starts_with("HTTP/1.1 200"), "{reply}");
+    let body = reply.split_once("\r\n\r\n").unwrap().1;
+    let geometry: serde_json::Value = serde_json::from_str(body).unwrap();
+    let loaded = clsmap::map::file::load(&map_json).unwrap();
+    assert_eq!(
+        geometry["walls"].as_array().unwrap().len(),
+        loaded.contents.cls.actual_segments().count()
+    );
+    // Nothing changes a saved map from the page.
+    let mut stream = std::net::TcpStream::connect(&address).unwrap();
+    stream
+        .write_all(b"POST /api/control/stop HTTP/1.1\r\nHost: clsmap\r\nContent-Length: 0\r\nConnection: close\r\n\r\n")
+        .unwrap();
+    let mut reply = String::new();
+    stream.read_to_string(&mut reply).unwrap();
+    assert!(reply.starts_with("HTTP/1.1 403"), "{reply}");
+    let pid = child.id().to_string();
+    Command::new("kill").args(["-INT", &pid]).status().unwrap();
+    let status = wait_at_most(&mut child, Duration::from_secs(10)).expect("view stops on Ctrl-C");
+    assert!(status.success(), "{status:?}");
+}

@@ -1,0 +1,406 @@
+//! The live view's HTTP server (axum), on a thread and a runtime of its
+//! own: `/` the page (embedded, works offline), `/api/status`,
+//! `/api/map` (the map file, version 2), `/api/geometry` (what the page
+//! draws), `/api/trajectory`, `/api/events` (server-sent events: `status`
+//! at the configured rate, `map` when the map changed), and, only with a
+//! token, `POST /api/control/{pause,resume,stop}`.
+//!
+//! Read-only without a token. At most `max_clients` requests at once,
+//! streams included; more are refused with 503, never queued. A stream
+//! sends only the newest snapshot, so a slow reader costs no memory.
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+use axum::Router;
+use axum::extract::{Path, Request, State};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::middleware::{self, Next};
+use axum::response::sse::{Event, KeepAlive, Sse};
+use axum::response::{Html, IntoResponse, Response};
+use axum::routing::{get, post};
+use tokio::sync::{Semaphore, mpsc, watch};
+use tracing::{error, info};
+
+use super::{ControlCommand, LiveView, MapView};
+
+/// The page: one file, no outside resources.
+const PAGE: &str = include_str!("page.html");
+
+/// Why the server could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum WebError {
+    #[error("cannot listen on {address} for the live view")]
+    Bind {
+        address: SocketAddr,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("cannot start the live view's thread")]
+    Thread(#[source] std::io::Error),
+}
+
+/// How the server runs.
+#[derive(Debug, Clone)]
+pub struct WebOptions {
+    pub address: SocketAddr,
+    /// Control requests need `Authorization: Bearer <token>`; none: no
+    /// control at all.
+    pub token: Option<String>,
+    pub max_clients: usize,
+}
+
+/// Where the loop puts its snapshots, and takes the page's commands from.
+#[derive(Debug)]
+pub struct WebFeed {
+    pub view: watch::Sender<Option<Arc<LiveView>>>,
+    pub map: watch::Sender<Option<Arc<MapView>>>,
+    pub control: mpsc::Receiver<ControlCommand>,
+}
+
+/// A running server; dropping it stops it.
+#[derive(Debug)]
+pub struct WebServer {
+    address: SocketAddr,
+    stop: Option<tokio::sync::oneshot::Sender<()>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl WebServer {
+    /// The address it listens on (the port filled in when 0 was asked).
+    pub fn address(&self) -> SocketAddr {
+        self.address
+    }
+
+    /// Stops serving and waits for the thread.
+    pub fn stop(mut self) {
+        self.shut_down();
+    }
+
+    fn shut_down(&mut self) {
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(());
+        }
+        if let Some(thread) = self.thread.take()
+            && thread.join().is_err()
+        {
+            error!("the live view's thread panicked");
+        }
+    }
+}
+
+impl Drop for WebServer {
+    fn drop(&mut self) {
+        self.shut_down();
+    }
+}
+
+#[derive(Clone)]
+struct AppState {
+    view: watch::Receiver<Option<Arc<LiveView>>>,
+    map: watch::Receiver<Option<Arc<MapView>>>,
+    control: mpsc::Sender<ControlCommand>,
+    token: Option<Arc<str>>,
+    clients: Arc<Semaphore>,
+}
+
+/// Binds `options.address` now (so a taken port is an error at start)
+/// and serves on a thread of its own until stopped.
+pub fn serve(options: WebOptions) -> Result<(WebServer, WebFeed), WebError> {
+    let listener =
+        std::net::TcpListener::bind(options.address).map_err(|source| WebError::Bind {
+            address: options.address,
+            source,
+        })?;
+    let bind_error = |source| WebError::Bind {
+        address: options.address,
+        source,
+    };
+    listener.set_nonblocking(true).map_err(bind_error)?;
+    let address = listener.local_addr().map_err(bind_error)?;
+    let (view_tx, view_rx) = watch::channel(None);
+    let (map_tx, map_rx) = watch::channel(None);
+    let (control_tx, control_rx) = mpsc::channel(8);
+    let state = AppState {
+        view: view_rx,
+        map: map_rx,
+        control: control_tx,
+        token: options.token.as_deref().map(Arc::from),
+        clients: Arc::new(Semaphore::new(options.max_clients)),
+    };
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let thread = std::thread::Builder::new()
+        .name("clsmap-web".into())
+        .spawn(move || {
+            let runtime = match tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+            {
+                Ok(rt) => rt,
+                Err(e) => {
+                    error!("cannot start the live view's runtime: {e}");
+                    return;
+                }
+            };
+            runtime.block_on(async move {
+                let listener = match tokio::net::TcpListener::from_std(listener) {
+                    Ok(l) => l,
+                    Err(e) => {
+                        error!("cannot listen for the live view: {e}");
+                        return;
+                    }
+                };
+                let served = axum::serve(listener, router(state))
+                    .with_graceful_shutdown(async {
+                        let _ = stop_rx.await;
+                    })
+                    .await;
+                if let Err(e) = served {
+                    error!("the live view stopped: {e}");
+                }
+            });
+        })
+        .map_err(WebError::Thread)?;
+    info!(%address, "live view on http://{address}/");
+    Ok((
+        WebServer {
+            address,
+            stop: Some(stop_tx),
+            thread: Some(thread),
+        },
+        WebFeed {
+            view: view_tx,
+            map: map_tx,
+            control: control_rx,
+        },
+    ))
+}
+
+fn router(state: AppState) -> Router {
+    let limited = Router::new()
+        .route("/", get(page))
+        .route("/api/status", get(status))
+        .route("/api/map", get(map_file))
+        .route("/api/geometry", get(geometry))
+        .route("/api/trajectory", get(trajectory))
+        .route("/api/control/{action}", post(control))
+        .layer(middleware::from_fn_with_state(state.clone(), one_of_few));
+    Router::new()
+        // The stream takes its client slot itself and keeps it.
+        .route("/api/events", get(events))
+        .merge(limited)
+        .with_state(state)
+}
+
+fn too_many() -> Response {
+    (
+        StatusCode::SERVICE_UNAVAILABLE,
+        [(header::RETRY_AFTER, HeaderValue::from_static("2"))],
+        "too many clients of the live view; try again\n",
+    )
+        .into_response()
+}
+
+/// Serves a request only while fewer than `max_clients` are in progress.
+async fn one_of_few(State(state): State<AppState>, request: Request, next: Next) -> Response {
+    let Ok(_permit) = state.clients.clone().try_acquire_owned() else {
+        return too_many();
+    };
+    next.run(request).await
+}
+
+/// The page, with the newest snapshots in it so that it shows the robot
+/// at once (and a browser that runs no script past the first one still
+/// sees the map).
+async fn page(State(state): State<AppState>) -> Html<String> {
+    #[derive(serde::Serialize)]
+    struct Initial<'a> {
+        view: Option<&'a LiveView>,
+        map: Option<&'a MapView>,
+    }
+    let (view, map) = (state.view.borrow().clone(), state.map.borrow().clone());
+    let initial = Initial {
+        view: view.as_deref(),
+        map: map.as_deref(),
+    };
+    // JSON inside <script>: a "</" would end the element early.
+    let json = serde_json::to_string(&initial)
+        .unwrap_or_else(|_| "{}".into())
+        .replace("</", "<\\/");
+    Html(PAGE.replace("/*INITIAL*/", &json))
+}
+
+fn json(body: String) -> Response {
+    (
+        [
+            (
+                header::CONTENT_TYPE,
+                HeaderValue::from_static("application/json"),
+            ),
+            (header::CACHE_CONTROL, HeaderValue::from_static("no-store")),
+        ],
+        body,
+    )
+        .into_response()
+}
+
+fn not_yet(what: &str) -> Response {
+    (
+        StatusCode::SERVICE_UNAVAILABLE,
+        format!("no {what} yet: the loop has not published one\n"),
+    )
+        .into_response()
+}
+
+fn encode<T: serde::Serialize>(value: &T) -> Response {
+    match serde_json::to_string(value) {
+        Ok(body) => json(body),
+        Err(e) => (
+            StatusCode::INTERNAL_SERVER_ERROR,
+            format!("cannot encode: {e}\n"),
+        )
+            .into_response(),
+    }
+}
+
+async fn status(State(state): State<AppState>) -> Response {
+    let view = state.view.borrow().clone();
+    match view {
+        Some(view) => encode(&*view),
+        None => not_yet("status"),
+    }
+}
+
+async fn geometry(State(state): State<AppState>) -> Response {
+    let map = state.map.borrow().clone();
+    match map {
+        Some(map) => encode(&*map),
+        None => not_yet("map"),
+    }
+}
+
+async fn trajectory(State(state): State<AppState>) -> Response {
+    let map = state.map.borrow().clone();
+    match map {
+        Some(map) => encode(&map.path),
+        None => not_yet("trajectory"),
+    }
+}
+
+/// The map file as `clsmap map` writes it (version 2), encoded here on
+/// the server's thread.
+async fn map_file(State(state): State<AppState>) -> Response {
+    let contents = state.map.borrow().as_ref().and_then(|m| m.contents.clone());
+    let Some(contents) = contents else {
+        return not_yet("map");
+    };
+    let encoded = tokio::task::spawn_blocking(move || crate::map::file::encode(&contents)).await;
+    match encoded {
+        Ok(Ok(body)) => json(body),
+        Ok(Err(e)) => (
+            StatusCode::INTERNAL_SERVER_ERROR,
+            format!("cannot encode the map: {e}\n"),
+        )
+            .into_response(),
+        Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("{e}\n")).into_response(),
+    }
+}
+
+/// Whether `headers` carry the configured token (compared in constant
+/// time, so its length and content do not leak through timing).
+fn authorized(token: &str, headers: &HeaderMap) -> bool {
+    let Some(given) = headers
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "))
+    else {
+        return false;
+    };
+    let (a, b) = (given.as_bytes(), token.as_bytes());
+    let differ = a
+        .iter()
+        .zip(b)
+        .fold(a.len() ^ b.len(), |acc, (x, y)| acc | usize::from(x ^ y));
+    differ == 0
+}
+
+async fn control(
+    State(state): State<AppState>,
+    Path(action): Path<String>,
+    headers: HeaderMap,
+) -> Response {
+    let Some(token) = state.token.as_deref() else {
+        return (
+            StatusCode::FORBIDDEN,
+            "this live view is read-only (no [web] token configured)\n",
+        )
+            .into_response();
+    };
+    if !authorized(token, &headers) {
+        return (
+            StatusCode::UNAUTHORIZED,
+            [(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"))],
+            "a control request needs the configured token\n",
+        )
+            .into_response();
+    }
+    let command = match action.as_str() {
+        "pause" => ControlCommand::Pause,
+        "resume" => ControlCommand::Resume,
+        "stop" => ControlCommand::Stop,
+        _ => {
+            return (
+                StatusCode::NOT_FOUND,
+                "control actions: pause, resume, stop\n",
+            )
+                .into_response();
+        }
+    };
+    match state.control.try_send(command) {
+        Ok(()) => (
+            StatusCode::ACCEPTED,
+            format!("{action}: sent to the loop\n"),
+        )
+            .into_response(),
+        Err(_) => too_many(),
+    }
+}
+
+/// Server-sent events: `status` with each new view, `map` with each new
+/// map version (its geometry), the newest only.
+async fn events(State(state): State<AppState>) -> Response {
+    let Ok(permit) = state.clients.clone().try_acquire_owned() else {
+        return too_many();
+    };
+    let mut view = state.view.clone();
+    let mut map = state.map.clone();
+    // The first events give what is there now.
+    view.mark_changed();
+    map.mark_changed();
+    let stream = futures_util::stream::unfold(
+        (view, map, permit),
+        |(mut view, mut map, permit)| async move {
+            let event = tokio::select! {
+                changed = map.changed() => {
+                    changed.ok()?;
+                    let m = map.borrow_and_update().clone();
+                    m.and_then(|m| serde_json::to_string(&*m).ok()).map(|d| Event::default().event("map").data(d))
+                }
+                changed = view.changed() => {
+                    changed.ok()?;
+                    let v = view.borrow_and_update().clone();
+                    v.and_then(|v| serde_json::to_string(&*v).ok()).map(|d| Event::default().event("status").data(d))
+                }
+            };
+            let event = event.unwrap_or_else(|| Event::default().comment("nothing yet"));
+            Some((
+                Ok::<_, std::convert::Infallible>(event),
+                (view, map, permit),
+            ))
+        },
+    );
+    Sse::new(stream)
+        .keep_alive(KeepAlive::new().interval(Duration::from_secs(10)))
+        .into_response()
+}
