@@ -3,14 +3,14 @@
 use super::*;
 
 /// A running `clsmap run`, its stderr lines arriving on a channel.
-struct Daemon {
+pub(super) struct Daemon {
     child: Child,
     lines: std::sync::mpsc::Receiver<String>,
     seen: Vec<String>,
 }
 
 impl Daemon {
-    fn start(config: &Path) -> Daemon {
+    pub(super) fn start(config: &Path) -> Daemon {
         let mut child = clsmap_command()
             .args(["run", "--config", arg(config)])
             .stdin(Stdio::null())
@@ -36,7 +36,7 @@ impl Daemon {
     }
 
     /// Waits (at most `limit`) for a stderr line containing `text`.
-    fn wait_for(&mut self, text: &str, limit: Duration) {
+    pub(super) fn wait_for(&mut self, text: &str, limit: Duration) {
         let deadline = Instant::now() + limit;
         if self.seen.iter().any(|l| l.contains(text)) {
             return;
@@ -60,7 +60,15 @@ impl Daemon {
         );
     }
 
-    fn signal(&self, name: &str) {
+    /// The first stderr line seen so far containing `text`.
+    pub(super) fn line_with(&self, text: &str) -> Option<&str> {
+        self.seen
+            .iter()
+            .find(|l| l.contains(text))
+            .map(String::as_str)
+    }
+
+    pub(super) fn signal(&self, name: &str) {
         let status = Command::new("kill")
             .args([&format!("-{name}"), &self.child.id().to_string()])
             .status()
@@ -69,7 +77,7 @@ impl Daemon {
     }
 
     /// Waits for the exit; returns the status, stdout and all of stderr.
-    fn finish(mut self, limit: Duration) -> (ExitStatus, String, String) {
+    pub(super) fn finish(mut self, limit: Duration) -> (ExitStatus, String, String) {
         let stdout = drain(self.child.stdout.take());
         let status = wait_at_most(&mut self.child, limit)
             .unwrap_or_else(|| panic!("clsmap run did not stop within {limit:?}"));
@@ -81,7 +89,7 @@ impl Daemon {
     }
 }
 
-fn demo_run_config(dir: &TempDir, extra: &str) -> PathBuf {
+pub(super) fn demo_run_config(dir: &TempDir, extra: &str) -> PathBuf {
     let text =
         std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("config/demo.toml"))
             .unwrap()

@@ -438,3 +438,4 @@ mod damaged_input;
 mod decode;
 mod emulator;
 mod mapping;
+mod web;

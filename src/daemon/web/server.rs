@@ -151,13 +151,9 @@ pub fn serve(options: WebOptions) -> Result<(WebServer, WebFeed), WebError> {
                         return;
                     }
                 };
-                let served = axum::serve(listener, router(state))
-                    .with_graceful_shutdown(async {
-                        let _ = stop_rx.await;
-                    })
-                    .await;
-                if let Err(e) = served {
-                    error!("the live view stopped: {e}");
+                tokio::select! {
+                    () = accept_loop(listener, router(state)) => {}
+                    _ = stop_rx => {}
                 }
             });
         })
@@ -175,6 +171,117 @@ pub fn serve(options: WebOptions) -> Result<(WebServer, WebFeed), WebError> {
             control: control_rx,
         },
     ))
+}
+
+/// How long a client may leave written data unread before it is dropped:
+/// a page that stopped reading (a laptop lid closed) gives back its slot.
+pub const STALLED_CLIENT: Duration = Duration::from_secs(10);
+
+/// Serves each connection on its own task, its writes guarded by
+/// [`StallGuard`]; a failed accept (out of descriptors) waits a moment.
+async fn accept_loop(listener: tokio::net::TcpListener, router: Router) {
+    loop {
+        let stream = match listener.accept().await {
+            Ok((stream, _)) => stream,
+            Err(e) => {
+                error!("the live view cannot accept a connection: {e}");
+                tokio::time::sleep(Duration::from_millis(100)).await;
+                continue;
+            }
+        };
+        let _ = stream.set_nodelay(true);
+        let service = hyper_util::service::TowerToHyperService::new(router.clone());
+        let io = hyper_util::rt::TokioIo::new(StallGuard::new(stream, STALLED_CLIENT));
+        tokio::spawn(async move {
+            let served = hyper::server::conn::http1::Builder::new()
+                .timer(hyper_util::rt::TokioTimer::new())
+                .header_read_timeout(Duration::from_secs(10))
+                .serve_connection(io, service)
+                .await;
+            if let Err(e) = served {
+                tracing::debug!("live view connection ended: {e}");
+            }
+        });
+    }
+}
+
+/// A socket whose writes fail once they have waited `limit` for the peer
+/// to read, so a stalled client's connection ends instead of holding its
+/// slot (and its task) for ever.
+struct StallGuard {
+    inner: tokio::net::TcpStream,
+    limit: Duration,
+    deadline: Option<std::pin::Pin<Box<tokio::time::Sleep>>>,
+}
+
+impl StallGuard {
+    fn new(inner: tokio::net::TcpStream, limit: Duration) -> StallGuard {
+        StallGuard {
+            inner,
+            limit,
+            deadline: None,
+        }
+    }
+
+    /// Pending: arm the deadline (or see it passed); ready: disarm it.
+    fn guard<T>(
+        &mut self,
+        cx: &mut std::task::Context<'_>,
+        polled: std::task::Poll<std::io::Result<T>>,
+    ) -> std::task::Poll<std::io::Result<T>> {
+        use std::task::Poll;
+        if polled.is_ready() {
+            self.deadline = None;
+            return polled;
+        }
+        let limit = self.limit;
+        let deadline = self
+            .deadline
+            .get_or_insert_with(|| Box::pin(tokio::time::sleep(limit)));
+        match deadline.as_mut().poll(cx) {
+            Poll::Ready(()) => Poll::Ready(Err(std::io::Error::new(
+                std::io::ErrorKind::TimedOut,
+                "the client stopped reading",
+            ))),
+            Poll::Pending => Poll::Pending,
+        }
+    }
+}
+
+impl tokio::io::AsyncRead for StallGuard {
+    fn poll_read(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        buf: &mut tokio::io::ReadBuf<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        std::pin::Pin::new(&mut self.inner).poll_read(cx, buf)
+    }
+}
+
+impl tokio::io::AsyncWrite for StallGuard {
+    fn poll_write(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        buf: &[u8],
+    ) -> std::task::Poll<std::io::Result<usize>> {
+        let polled = std::pin::Pin::new(&mut self.inner).poll_write(cx, buf);
+        self.guard(cx, polled)
+    }
+
+    fn poll_flush(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        let polled = std::pin::Pin::new(&mut self.inner).poll_flush(cx);
+        self.guard(cx, polled)
+    }
+
+    fn poll_shutdown(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        std::pin::Pin::new(&mut self.inner).poll_shutdown(cx)
+    }
 }
 
 fn router(state: AppState) -> Router {
@@ -403,4 +510,71 @@ async fn events(State(state): State<AppState>) -> Response {
     Sse::new(stream)
         .keep_alive(KeepAlive::new().interval(Duration::from_secs(10)))
         .into_response()
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use tokio::io::AsyncWriteExt;
+
+    #[test]
+    fn a_client_that_stops_reading_is_dropped() {
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        runtime.block_on(async {
+            let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+            let address = listener.local_addr().unwrap();
+            // The client connects and never reads.
+            let _client = tokio::net::TcpStream::connect(address).await.unwrap();
+            let (server_side, _) = listener.accept().await.unwrap();
+            let mut guarded = StallGuard::new(server_side, Duration::from_millis(300));
+            let chunk = vec![0u8; 64 * 1024];
+            let started = std::time::Instant::now();
+            let mut written = 0usize;
+            let error = loop {
+                match guarded.write(&chunk).await {
+                    Ok(n) => written += n,
+                    Err(e) => break e,
+                }
+                assert!(
+                    written < 1 << 30,
+                    "1 GiB written to a client that never reads"
+                );
+            };
+            assert_eq!(error.kind(), std::io::ErrorKind::TimedOut);
+            // Dropped once the buffers were full and the limit had passed.
+            assert!(started.elapsed() >= Duration::from_millis(300));
+            assert!(written > 0);
+        });
+    }
+
+    #[test]
+    fn the_token_is_compared_whole() {
+        let mut headers = HeaderMap::new();
+        let token = "0123456789abcdef";
+        assert!(!authorized(token, &headers));
+        headers.insert(
+            header::AUTHORIZATION,
+            HeaderValue::from_static("Bearer 0123456789abcdef"),
+        );
+        assert!(authorized(token, &headers));
+        headers.insert(
+            header::AUTHORIZATION,
+            HeaderValue::from_static("Bearer 0123456789abcde"),
+        );
+        assert!(!authorized(token, &headers));
+        headers.insert(
+            header::AUTHORIZATION,
+            HeaderValue::from_static("Bearer 0123456789abcdef0"),
+        );
+        assert!(!authorized(token, &headers));
+        headers.insert(
+            header::AUTHORIZATION,
+            HeaderValue::from_static("0123456789abcdef"),
+        );
+        assert!(!authorized(token, &headers));
+    }
 }
