@@ -134,6 +134,9 @@ struct MapKey {
     frontiers: usize,
     loops: usize,
     optimisations: u64,
+    /// Poses on the path drawn (it grows in localize mode too, where the
+    /// map does not).
+    path: usize,
 }
 
 impl Core {
@@ -311,6 +314,7 @@ impl Core {
             frontiers: status.frontiers,
             loops: status.loops_closed,
             optimisations: self.optimisations,
+            path: self.live.picture_path().count(),
         };
         if self.map_key != Some(key) && now - self.last_map_view >= MAP_VIEW_EVERY {
             self.map_key = Some(key);
@@ -428,7 +432,8 @@ impl Core {
     pub fn poll_timeout(&self) -> f64 {
         let t = &self.timers;
         let checkpoint = t.checkpoint.map_or(f64::INFINITY, |c| c.next);
-        t.control.next.min(t.status.next).min(checkpoint)
+        let view = t.view.map_or(f64::INFINITY, |v| v.next);
+        t.control.next.min(t.status.next).min(checkpoint).min(view)
     }
 
     /// True once: time to tell systemd the daemon is ready (the first
@@ -523,6 +528,8 @@ impl Core {
             ("base", base_fixed != old.base),
             ("sim", new.sim != old.sim),
             ("daemon", new.daemon != old.daemon),
+            ("web", new.web != old.web),
+            ("map", new.map != old.map),
         ] {
             if changed {
                 restart.push(name.to_string());

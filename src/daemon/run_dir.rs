@@ -82,8 +82,7 @@ impl RunDirs {
     }
 
     /// Saves `core`'s map into the run's directory; if that fails, into a
-    /// rescue directory beside the state directory, then beside its
-    /// parent. Returns where it went and, if rescued, why.
+    /// rescue directory in the state directory, then in its parent. Returns where it went and, if rescued, why.
     pub fn save(
         &mut self,
         core: &mut Core,

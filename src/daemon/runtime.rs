@@ -1,13 +1,16 @@
 //! The real-time loop on tokio: the sensor thread, the base, the mapper,
 //! the explorer, checkpoints, status and systemd, wired together.
 //!
-//! One current-thread runtime runs the loop; the serial driver runs on its
-//! own thread (it blocks on the port) and hands over only the newest scan;
-//! checkpoints are written on a blocking thread. The loop reacts to: a new
-//! scan (localize, maybe grow the map), a base tick (poll odometry,
-//! command the base, ping the watchdog), a status tick, a checkpoint tick
-//! and its completion, sensor reports, a reload request and the shutdown
-//! future. On shutdown it stops the base, stops the sensor, saves the map.
+//! One current-thread runtime runs the loop around [`Core`]; the serial
+//! driver runs on its own thread (it blocks on the port) and hands over
+//! only the newest scan; checkpoints and loop-closure optimisations run on
+//! blocking threads; the live view serves from a thread of its own. The
+//! loop turns into `Core` calls: a new scan, the core's next timeout, a
+//! checkpoint's or an optimisation's completion, sensor reports, the live
+//! view's commands, a reload request and the shutdown future; what the
+//! core polls out becomes systemd notifications, snapshots for the live
+//! view, checkpoints and optimisations. On shutdown it stops the base,
+//! stops the sensor, saves the map.
 
 use std::future::Future;
 use std::path::{Path, PathBuf};
@@ -347,6 +350,27 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     // loop goes on localizing against the old map meanwhile.
     let mut live = start_map(&config, exploration)?;
     live.set_background_optimisation(true);
+    let Hooks {
+        shutdown: mut shutdown_signal,
+        mut reload,
+        config_path,
+        mut on_scan,
+        mut on_web,
+        web_any_port,
+        ..
+    } = hooks;
+    // The live view's port next: a taken one stops the start before the
+    // sensor and the base are touched.
+    let web = start_web(&config, web_any_port)?;
+    let (_web_server, mut web_feed) = match web {
+        Some((server, feed)) => {
+            if let Some(hook) = on_web.as_mut() {
+                hook(server.address());
+            }
+            (Some(server), Some(feed))
+        }
+        None => (None, None),
+    };
     let mut rig = build_rig(&config, t0)?;
     let (scan_tx, mut scan_rx) = watch::channel::<Option<ScanSlot>>(None);
     let (report_tx, mut report_rx) = mpsc::unbounded_channel();
@@ -374,31 +398,15 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
         config.sensor.retry_initial,
         config.sensor.retry_max,
     );
-    let Hooks {
-        shutdown: mut shutdown_signal,
-        mut reload,
-        config_path,
-        mut on_scan,
-        mut on_web,
-        web_any_port,
-        ..
-    } = hooks;
-    let web = start_web(&config, web_any_port)?;
-    let (_web_server, mut web_feed) = match web {
-        Some((server, feed)) => {
-            if let Some(hook) = on_web.as_mut() {
-                hook(server.address());
-            }
-            (Some(server), Some(feed))
-        }
-        None => (None, None),
-    };
     let mut core = Core::new(config, live, base);
     let mut last_seq = 0;
     let mut writing: Option<JoinHandle<Result<(), CheckpointFailed>>> = None;
     let mut optimising: Option<JoinHandle<OptimisationResult>> = None;
     let reason = loop {
-        let wake = t0 + Duration::try_from_secs_f64(core.poll_timeout()).unwrap_or(Duration::MAX);
+        let wake = Duration::try_from_secs_f64(core.poll_timeout())
+            .ok()
+            .and_then(|d| t0.checked_add(d))
+            .unwrap_or_else(|| Instant::now() + Duration::from_secs(3600));
         tokio::select! {
             () = &mut shutdown_signal => break StopReason::Shutdown,
             Some(()) = async {

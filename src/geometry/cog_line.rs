@@ -24,9 +24,11 @@ pub struct CogLine {
     pub sigma_theta: f64,
     /// Standard deviation of the centre across the line (m).
     pub sigma_c: f64,
-    /// First fitted point projected onto the line (m).
+    /// First fitted point projected onto the line (m); at a true end of
+    /// the wall, half a beam spacing beyond it (where the end lies on
+    /// average, see `geometry::ends`).
     pub start: [f64; 2],
-    /// Last fitted point projected onto the line (m).
+    /// Last fitted point projected onto the line (m); likewise.
     pub end: [f64; 2],
     /// Number of range points the line was fitted to.
     pub n_points: usize,

@@ -11,7 +11,8 @@
 //! is the weighted mean of each line's offset at a common reference point
 //! (weights 1/(σc² + s²σθ²), `s` the distance of the reference from that
 //! line's centre), and the end points of both are projected onto the fused
-//! line with the extremes kept. Map lines are floored at a minimum σ so
+//! line with the extremes kept, except where both saw a true end of the
+//! wall that agrees: there the end is their σ-weighted mean. Map lines are floored at a minimum σ so
 //! that many correlated observations (the same walls seen from poses that
 //! were themselves derived from this map) do not make the map rigid beyond
 //! what those observations justify.

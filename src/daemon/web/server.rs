@@ -6,8 +6,11 @@
 //! token, `POST /api/control/{pause,resume,stop}`.
 //!
 //! Read-only without a token. At most `max_clients` requests at once,
-//! streams included; more are refused with 503, never queued. A stream
-//! sends only the newest snapshot, so a slow reader costs no memory.
+//! streams included; more are refused with 503, never queued. One request
+//! per connection and at most `2 · max_clients + 4` connections open (more
+//! wait in the kernel's backlog), so clients cannot use up the daemon's
+//! file descriptors. A stream sends only the newest snapshot, and a client
+//! that leaves it unread for [`STALLED_CLIENT`] is dropped.
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -19,6 +22,7 @@ use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{Html, IntoResponse, Response};
+
 use axum::routing::{get, post};
 use tokio::sync::{Semaphore, mpsc, watch};
 use tracing::{error, info};
@@ -151,8 +155,11 @@ pub fn serve(options: WebOptions) -> Result<(WebServer, WebFeed), WebError> {
                         return;
                     }
                 };
+                // Requests beyond `max_clients` get 503 from the router;
+                // connections beyond this wait in the backlog.
+                let connections = 2 * options.max_clients + 4;
                 tokio::select! {
-                    () = accept_loop(listener, router(state)) => {}
+                    () = accept_loop(listener, router(state), connections) => {}
                     _ = stop_rx => {}
                 }
             });
@@ -178,9 +185,16 @@ pub fn serve(options: WebOptions) -> Result<(WebServer, WebFeed), WebError> {
 pub const STALLED_CLIENT: Duration = Duration::from_secs(10);
 
 /// Serves each connection on its own task, its writes guarded by
-/// [`StallGuard`]; a failed accept (out of descriptors) waits a moment.
-async fn accept_loop(listener: tokio::net::TcpListener, router: Router) {
+/// [`StallGuard`], one request per connection (no keep-alive, so an idle
+/// connection does not outlive its request), at most `connections` at
+/// once (more wait in the kernel's backlog); a failed accept (out of
+/// descriptors) waits a moment.
+async fn accept_loop(listener: tokio::net::TcpListener, router: Router, connections: usize) {
+    let open = Arc::new(Semaphore::new(connections));
     loop {
+        let Ok(slot) = open.clone().acquire_owned().await else {
+            return;
+        };
         let stream = match listener.accept().await {
             Ok((stream, _)) => stream,
             Err(e) => {
@@ -193,9 +207,11 @@ async fn accept_loop(listener: tokio::net::TcpListener, router: Router) {
         let service = hyper_util::service::TowerToHyperService::new(router.clone());
         let io = hyper_util::rt::TokioIo::new(StallGuard::new(stream, STALLED_CLIENT));
         tokio::spawn(async move {
+            let _slot = slot;
             let served = hyper::server::conn::http1::Builder::new()
                 .timer(hyper_util::rt::TokioTimer::new())
                 .header_read_timeout(Duration::from_secs(10))
+                .keep_alive(false)
                 .serve_connection(io, service)
                 .await;
             if let Err(e) = served {
@@ -320,7 +336,7 @@ async fn one_of_few(State(state): State<AppState>, request: Request, next: Next)
 /// The page, with the newest snapshots in it so that it shows the robot
 /// at once (and a browser that runs no script past the first one still
 /// sees the map).
-async fn page(State(state): State<AppState>) -> Html<String> {
+async fn page(State(state): State<AppState>) -> Response {
     #[derive(serde::Serialize)]
     struct Initial<'a> {
         view: Option<&'a LiveView>,
@@ -331,11 +347,28 @@ async fn page(State(state): State<AppState>) -> Html<String> {
         view: view.as_deref(),
         map: map.as_deref(),
     };
-    // JSON inside <script>: a "</" would end the element early.
+    // JSON inside <script>: no `<`, `>` or `&` may appear raw (they could
+    // end the element or open a comment); JSON's \u escapes stand for them.
     let json = serde_json::to_string(&initial)
         .unwrap_or_else(|_| "{}".into())
-        .replace("</", "<\\/");
-    Html(PAGE.replace("/*INITIAL*/", &json))
+        .replace('<', "\\u003c")
+        .replace('>', "\\u003e")
+        .replace('&', "\\u0026");
+    (
+        [
+            // Not to be framed by another site (a STOP button under a
+            // decoy), and nothing loaded from elsewhere.
+            (header::X_FRAME_OPTIONS, HeaderValue::from_static("DENY")),
+            (
+                header::CONTENT_SECURITY_POLICY,
+                HeaderValue::from_static(
+                    "default-src 'self'; script-src 'unsafe-inline'; style-src 'unsafe-inline'; frame-ancestors 'none'",
+                ),
+            ),
+        ],
+        Html(PAGE.replace("/*INITIAL*/", &json)),
+    )
+        .into_response()
 }
 
 fn json(body: String) -> Response {
