@@ -97,18 +97,79 @@ mod layers {
         out
     }
 
+    /// `text` without its comment lines and without the items marked
+    /// `#[cfg(test)]` (a `mod … { … }` block, found by its braces, or a
+    /// one-line `use`/`mod`), wherever they stand in the file.
+    fn code_without_tests(text: &str) -> String {
+        let lines: Vec<&str> = text
+            .lines()
+            .filter(|l| !l.trim_start().starts_with("//"))
+            .collect();
+        let mut out = String::new();
+        let mut k = 0;
+        while k < lines.len() {
+            if lines[k].trim() != "#[cfg(test)]" {
+                out.push_str(lines[k]);
+                out.push('\n');
+                k += 1;
+                continue;
+            }
+            // Skip the marked item: attributes, then its lines up to the
+            // `;` of a one-liner or the brace closing its block.
+            k += 1;
+            while k < lines.len() && lines[k].trim_start().starts_with("#[") {
+                k += 1;
+            }
+            let (mut depth, mut opened) = (0i64, false);
+            while k < lines.len() {
+                let line = lines[k];
+                k += 1;
+                opened |= line.contains('{');
+                depth += line.matches('{').count() as i64 - line.matches('}').count() as i64;
+                if (!opened && line.trim_end().ends_with(';')) || (opened && depth <= 0) {
+                    break;
+                }
+            }
+        }
+        out
+    }
+
     /// The top-level modules `crate::…` names in the code (not comments,
-    /// not the `#[cfg(test)]` part at the end) of `text`.
+    /// not `#[cfg(test)]` items) of `text`, grouped imports included.
     fn used_modules(text: &str) -> Vec<String> {
-        let code = text.split("\n#[cfg(test)]").next().unwrap_or("");
+        let code = code_without_tests(text);
+        let name_at = |s: &str| -> String {
+            s.trim_start()
+                .chars()
+                .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                .collect()
+        };
         let mut used = Vec::new();
-        for line in code.lines().filter(|l| !l.trim_start().starts_with("//")) {
-            for (i, _) in line.match_indices("crate::") {
-                let rest = &line[i + "crate::".len()..];
-                let name: String = rest
-                    .chars()
-                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
-                    .collect();
+        for (i, _) in code.match_indices("crate::") {
+            let rest = &code[i + "crate::".len()..];
+            if let Some(group) = rest.strip_prefix('{') {
+                // `crate::{a, b::c, d::{e, f}}`: the first segment of each
+                // top-level item.
+                let mut depth = 0;
+                let mut item_start = true;
+                for (k, c) in group.char_indices() {
+                    match c {
+                        '{' => depth += 1,
+                        '}' if depth == 0 => break,
+                        '}' => depth -= 1,
+                        ',' if depth == 0 => item_start = true,
+                        _ if item_start && !c.is_whitespace() => {
+                            item_start = false;
+                            let name = name_at(&group[k..]);
+                            if !name.is_empty() {
+                                used.push(name);
+                            }
+                        }
+                        _ => {}
+                    }
+                }
+            } else {
+                let name = name_at(rest);
                 if !name.is_empty() {
                     used.push(name);
                 }
@@ -162,5 +223,11 @@ mod layers {
     fn the_check_sees_an_import_in_code_and_not_in_comments_or_tests() {
         let text = "use crate::daemon::Core;\n// crate::sim in a comment\nfn f() {}\n#[cfg(test)]\nmod tests { use crate::sim::Rng; }\n";
         assert_eq!(used_modules(text), vec!["daemon".to_string()]);
+        // Test items anywhere in the file, and code after them.
+        let text = "#[cfg(test)]\nuse crate::sim::Rng;\n#[cfg(test)]\n#[allow(dead_code)]\nmod checks {\n    fn g() { crate::sim::x(); }\n}\nfn h() { crate::graph::y(); }\n";
+        assert_eq!(used_modules(text), vec!["graph".to_string()]);
+        // Grouped imports.
+        let text = "use crate::{\n    geometry::Pose2,\n    map::{Edge, cls::ClsMap},\n    pipeline,\n};\n";
+        assert_eq!(used_modules(text), vec!["geometry", "map", "pipeline"]);
     }
 }
