@@ -314,7 +314,7 @@ impl Core {
             frontiers: status.frontiers,
             loops: status.loops_closed,
             optimisations: self.optimisations,
-            path: self.live.picture_path().count(),
+            path: self.live.picture_path().len(),
         };
         if self.map_key != Some(key) && now - self.last_map_view >= MAP_VIEW_EVERY {
             self.map_key = Some(key);

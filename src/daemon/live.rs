@@ -270,7 +270,7 @@ impl LiveMapper {
     }
 
     /// The path drawn on the map's picture (map frame), oldest first.
-    pub fn picture_path(&self) -> impl Iterator<Item = &Pose2> + '_ {
+    pub fn picture_path(&self) -> impl ExactSizeIterator<Item = &Pose2> + '_ {
         self.picture_path.iter()
     }
 

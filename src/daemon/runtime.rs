@@ -446,10 +446,7 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
                 }
             } => {
                 optimising = None;
-                if let Err(e) = &result {
-                    error!("the loop-closure optimiser failed: {e}");
-                }
-                core.handle_optimisation_done(result.ok());
+                optimisation_done(&mut core, result);
             }
             Some(report) = report_rx.recv() => on_report(&mut core, &report),
             Some(command) = async {
@@ -509,11 +506,7 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
         checkpoint_done(&mut core, result);
     }
     if let Some(task) = optimising.take() {
-        let result = task.await;
-        if let Err(e) = &result {
-            error!("the loop-closure optimiser failed: {e}");
-        }
-        core.handle_optimisation_done(result.ok());
+        optimisation_done(&mut core, task.await);
     }
     // Loops that agreed with the graph but were not optimised yet are
     // taken in before the last save.
@@ -609,6 +602,15 @@ fn checkpoint_done(
             core.handle_checkpoint_lost();
         }
     }
+}
+
+/// Takes in a background optimisation's result; a job whose thread
+/// failed is abandoned, so the next one takes its loops in.
+fn optimisation_done(core: &mut Core, result: Result<OptimisationResult, tokio::task::JoinError>) {
+    if let Err(e) = &result {
+        error!("the loop-closure optimiser failed: {e}");
+    }
+    core.handle_optimisation_done(result.ok());
 }
 
 /// Re-reads the configuration (SIGHUP); a file that does not load is

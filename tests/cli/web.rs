@@ -88,6 +88,8 @@ fn the_page_shows_clsmap_run_mapping_in_a_headless_browser() {
         first.contains("id=\"robot\" visibility=\"visible\""),
         "no robot marker"
     );
+    assert_eq!(text_of(&first, "sensor"), "streaming");
+    assert_eq!(text_of(&first, "state"), "localized");
     for field in ["state", "pose", "sensor", "rate", "mapsize", "uptime"] {
         let t = text_of(&first, field);
         assert!(!t.is_empty() && t != "–", "#{field} is empty: {t:?}");
