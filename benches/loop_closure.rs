@@ -59,7 +59,7 @@ fn mapped_loop() -> Mapper {
         });
         t += 0.2;
     }
-    mapper.finish();
+    mapper.settle();
     mapper
 }
 

@@ -97,7 +97,7 @@ fn main() -> Result<(), Box<dyn Error>> {
             prev = Some((o.pose, odo));
         }
     }
-    mapper.finish();
+    mapper.settle();
     let summary = mapper.summary();
     println!(
         "{} scans, {} relations in span",

@@ -78,6 +78,9 @@ pub struct DemoSummary {
     pub frontiers: usize,
     pub loops: usize,
     pub goals: usize,
+    /// Long frontiers the explorer left open (no reachable goal in front
+    /// of them, or their visits ran out).
+    pub frontiers_given_up: usize,
     /// Metres driven (truth).
     pub driven_m: f64,
     /// Mean and largest position error of the estimate (m) and largest
@@ -221,6 +224,7 @@ pub fn run_demo(
         frontiers: map.virtual_segments().count(),
         loops: map.loops().count(),
         goals: summary.status.explorer.map_or(0, |e| e.goals),
+        frontiers_given_up: summary.status.explorer.map_or(0, |e| e.given_up),
         driven_m: score.driven,
         mean_error_m: score.sum / score.n as f64,
         max_error_m: score.max,

@@ -75,6 +75,9 @@ fn explore_to_completion(world: &str) {
     std::fs::write(&svg, clsmap::render::picture(map, None, None).to_svg()).unwrap();
     println!("picture: {}", svg.display());
     assert!(done, "{world}: exploration did not complete");
+    // Completion was judged on the map as it is saved: every loop closed
+    // is optimised in.
+    assert!(live.mapper().is_settled(), "{world}");
     // Complete: every long frontier left was given up after its visits
     // (a wall piece left virtual a few cm off the wall can be one).
     let given_up = live.explorer().unwrap().given_up();

@@ -36,10 +36,16 @@ fn the_demo_world_is_explored_to_completion_through_the_pty() {
         .unwrap();
     assert_eq!(latency.count, summary.scans);
     assert!(summary.max_heading_error_deg < 1.0, "{summary:?}");
-    // The saved map loads, is valid and closed: no frontier worth a goal.
+    // The saved map loads, is valid and closed: no frontier worth a goal
+    // but those the explorer visited and gave up on (as on the virtual
+    // clock, a wall piece left virtual a few cm off the wall can be one).
     let map = ClsMap::load(&out.join("map.json"), ClsMapConfig::default()).unwrap();
     map.check_invariants().unwrap();
-    assert!(clsmap::explore::pursuit::long_frontiers(&map, 0.74).is_empty());
+    let left = clsmap::explore::pursuit::long_frontiers(&map, 0.74);
+    assert!(
+        left.len() <= summary.frontiers_given_up && summary.frontiers_given_up <= 2,
+        "long frontiers left: {left:?}, {summary:?}"
+    );
     for file in ["map.svg", "trajectory.tum", "demo.json"] {
         assert!(out.join(file).is_file(), "{file} missing");
     }

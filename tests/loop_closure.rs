@@ -67,7 +67,7 @@ fn map_tour_with(
     if let Some((_, job)) = in_flight {
         mapper.apply_optimisation(job.run());
     }
-    mapper.finish();
+    mapper.settle();
     let origin = truth[0];
     let (mut sq, mut worst) = (0.0, 0.0_f64);
     for ((_, p), t) in mapper.trajectory().iter().zip(truth) {
@@ -229,7 +229,7 @@ fn a_saved_map_reads_back_and_rebuilds_from_its_keyframes() {
     // file holds loop edges.
     config.loop_closure.revisit_distance = 0.0;
     let (mut mapper, _, _) = map_tour(&world, &truth, &odo, config, &mut rng);
-    mapper.finish();
+    mapper.settle();
     let loops = mapper.keyframe_graph().graph().loop_edges().count();
     assert!(
         loops > 0,

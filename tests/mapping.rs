@@ -180,7 +180,7 @@ fn csail_thinned_as_gmapping_keeps_scans_stays_consistent() {
         for r in &records {
             mapper.process(r);
         }
-        mapper.finish();
+        mapper.settle();
         let e = evaluate(mapper.trajectory(), &relations);
         show(&format!("thinned to {travel} m / {turn} rad"), &e);
         assert!(e.used >= 30, "{e:?}");
@@ -379,7 +379,7 @@ fn a_saved_map_is_localized_in_and_extended() {
     for r in &records {
         first.process(r);
     }
-    first.finish();
+    first.settle();
     let saved = first.contents();
     let by_time: std::collections::HashMap<u64, Pose2> = first
         .trajectory()
@@ -484,7 +484,7 @@ fn a_saved_map_is_localized_in_and_extended() {
     for r in &rest {
         extended.process(r);
     }
-    extended.finish();
+    extended.settle();
     let graph = extended.keyframe_graph();
     assert!(graph.len() > saved.keyframes.len(), "no keyframe added");
     assert!(graph.stats().accepted > 0, "{:?}", graph.stats());

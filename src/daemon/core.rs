@@ -571,7 +571,7 @@ impl Core {
     /// The end of a run: the last optimisation and rebuild, before the
     /// last save.
     pub fn finish(&mut self) {
-        self.live.finish();
+        self.live.settle();
     }
 
     /// Writes a checkpoint into `dir` now, on this thread (the last save,

@@ -154,15 +154,29 @@ impl LiveMapper {
     pub fn apply_optimisation(&mut self, result: crate::graph::OptimisationResult) {
         let _span = info_span!("apply_optimisation").entered();
         if let Some(c) = self.mapper.apply_optimisation(result) {
-            if let Some((_, pose, _)) = self.last_fix.as_mut() {
-                *pose = c.compose(pose);
-            }
-            for p in &mut self.picture_path {
-                *p = c.compose(p);
-            }
-            if let Some(explorer) = &mut self.explorer {
-                explorer.reframe(&c);
-            }
+            self.follow(&c);
+        }
+    }
+
+    /// See [`Mapper::settle`]; the live pose, the picture's path and the
+    /// explorer's goal move with the map as after an optimisation.
+    pub fn settle(&mut self) {
+        let _span = info_span!("settle").entered();
+        if let Some(c) = self.mapper.settle() {
+            self.follow(&c);
+        }
+    }
+
+    /// Everything kept in the map frame follows the map's `correction`.
+    fn follow(&mut self, c: &Pose2) {
+        if let Some((_, pose, _)) = self.last_fix.as_mut() {
+            *pose = c.compose(pose);
+        }
+        for p in &mut self.picture_path {
+            *p = c.compose(p);
+        }
+        if let Some(explorer) = &mut self.explorer {
+            explorer.reframe(c);
         }
     }
 
@@ -295,7 +309,15 @@ impl LiveMapper {
         let Some(explorer) = self.explorer.as_mut() else {
             return (Twist::ZERO, None);
         };
-        let result = explorer.control(self.mapper.cls_map(), pose, now);
+        let mut result = explorer.control(self.mapper.cls_map(), pose, now);
+        if matches!(result.1, Some(ExplorerEvent::Complete { .. })) && !self.mapper.is_settled() {
+            // Completion is judged on the map as it will be saved: the
+            // loops not optimised in yet may open a frontier.
+            info!("exploration: frontiers closed; the map takes in its last loops first");
+            explorer.reconsider(now);
+            self.settle();
+            result = (Twist::ZERO, None);
+        }
         self.latencies.record(Stage::Control, started.elapsed());
         if let Some(event) = &result.1 {
             log_event(event);
@@ -355,12 +377,6 @@ impl LiveMapper {
         poses.append(&mut self.unwritten);
         self.unwritten = poses;
         failed.error
-    }
-
-    /// The end of a run: the mapper's last optimisation and rebuild (see
-    /// [`Mapper::finish`]).
-    pub fn finish(&mut self) {
-        self.mapper.finish();
     }
 
     /// Writes a checkpoint into `dir` now (see [`Checkpoint::write`]).

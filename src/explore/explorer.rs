@@ -59,6 +59,9 @@ pub struct ExplorerStats {
     pub arrived: usize,
     pub timed_out: usize,
     pub plan_failures: usize,
+    /// Long frontiers left open when exploration completed: no goal in
+    /// front of them could be reached, or their visits ran out.
+    pub given_up: usize,
 }
 
 /// Virtual Line Segment Pursuit, step by step.
@@ -100,7 +103,16 @@ impl Explorer {
         matches!(self.state, State::Complete { .. })
     }
 
-    /// The goal driven to, if any.
+    /// The map changed after exploration completed (the pose graph took
+    /// in its last loops): settle from `now` (s) and plan again in it,
+    /// with the memory of the frontiers visited so far.
+    pub fn reconsider(&mut self, now: f64) {
+        if self.is_complete() {
+            self.stats.given_up = 0;
+            self.settle(now);
+        }
+    }
+
     /// The map moved under the robot (a loop closure, `new = correction ∘
     /// old`): the goal and the path to it follow, so the robot does not
     /// drive to where the goal was in the old frame.
@@ -110,6 +122,7 @@ impl Explorer {
         }
     }
 
+    /// The goal driven to, if any.
     pub fn goal(&self) -> Option<Pose2> {
         match &self.state {
             State::Driving { follower, .. } => Some(follower.goal()),
@@ -212,6 +225,7 @@ impl Explorer {
             }
             Ok(NextStep::Complete { given_up }) => {
                 let n = given_up.len();
+                self.stats.given_up = n;
                 self.state = State::Complete { given_up };
                 ExplorerEvent::Complete { given_up: n }
             }
@@ -276,6 +290,18 @@ mod tests {
         assert_eq!(ex.control(&closed, pose, t + 5.0), (Twist::ZERO, None));
         assert_eq!(ex.stats().goals, 1);
         assert_eq!(ex.stats().arrived, 1);
+        // The map changes after completion (its last loops optimised in)
+        // and opens a frontier again: the explorer settles and pursues it.
+        let t = t + 5.0;
+        ex.reconsider(t);
+        assert!(!ex.is_complete());
+        assert_eq!(ex.control(&open, pose, t + 0.01), (Twist::ZERO, None));
+        let (_, event) = ex.control(&open, pose, t + drive.settle_time + 0.01);
+        assert!(
+            matches!(event, Some(ExplorerEvent::Goal { .. })),
+            "{event:?}"
+        );
+        assert_eq!(ex.stats().goals, 2);
     }
 
     #[test]

@@ -546,15 +546,21 @@ impl KeyframeGraph {
         Some(near)
     }
 
+    /// Whether every loop edge is optimised in and no job is in flight:
+    /// [`settle`](Self::settle) would change nothing.
+    pub fn is_settled(&self) -> bool {
+        self.unoptimised_loops == 0 && !self.wants_optimisation && self.in_flight.is_none()
+    }
+
     /// Optimises once more if loop edges came in since the last
     /// optimisation (the end of a run); the correction of the newest
     /// keyframe when the poses moved.
     /// A job in flight is superseded: its result will be ignored.
     pub fn settle(&mut self, cfg: &LoopClosureConfig) -> Result<Option<Correction>, GraphError> {
-        let superseded = self.in_flight.take().is_some();
-        if self.unoptimised_loops == 0 && !self.wants_optimisation && !superseded {
+        if self.is_settled() {
             return Ok(None);
         }
+        self.in_flight = None;
         self.wants_optimisation = false;
         self.optimise(cfg).map(Some)
     }

@@ -221,16 +221,30 @@ impl Mapper {
         self.cls_stale = !self.graph.is_empty() || self.cls.is_empty();
     }
 
-    /// The end of a run: optimises the pose graph once more if loops came
-    /// in since its last optimisation, then brings the trajectory and both
-    /// maps up to date with the keyframes.
-    pub fn finish(&mut self) {
-        match self.graph.settle(&self.config.loop_closure) {
-            Ok(Some(c)) => self.apply_correction(&c),
-            Ok(None) => {}
-            Err(e) => warn!("pose graph not optimised at the end: {e}"),
-        }
+    /// Optimises the pose graph now if loops came in since its last
+    /// optimisation (superseding a background job in flight) and brings
+    /// the trajectory and both maps up to date; the newest keyframe's
+    /// correction when the poses moved. The end of a run calls it last.
+    pub fn settle(&mut self) -> Option<Pose2> {
+        let moved = match self.graph.settle(&self.config.loop_closure) {
+            Ok(Some(c)) => {
+                self.apply_correction(&c);
+                Some(c.correction)
+            }
+            Ok(None) => None,
+            Err(e) => {
+                warn!("pose graph not optimised: {e}");
+                None
+            }
+        };
         self.refresh_cls_map();
+        moved
+    }
+
+    /// Whether the map is up to date with every loop closed so far
+    /// ([`settle`](Self::settle) would change nothing).
+    pub fn is_settled(&self) -> bool {
+        self.graph.is_settled() && !self.cls_stale
     }
 
     /// Rebuilds the CLS map from the keyframes if a loop closure moved

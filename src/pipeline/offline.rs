@@ -104,7 +104,7 @@ pub fn run_offline_mapping(
         }
         return Err(PipelineError::NoScans);
     }
-    mapper.finish();
+    mapper.settle();
     let mut summary = mapper.summary();
     summary.input_broken = input_broken;
     summary.skipped_input = skipped;
