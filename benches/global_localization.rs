@@ -6,13 +6,19 @@
 //! tiles are identical, so the big map is also the hardest case for the
 //! vote: every scan line has twenty equally good partners.
 //!
+//! With the MIT CSAIL log at hand (`../shared/datasets/mit-csail/`), also
+//! the whole log's map (its walls, default mapper) and scan 1,000 of it.
+//!
 //! `cargo bench --bench global_localization -- --warm-up-time 1 --measurement-time 3`
 
 use std::hint::black_box;
 
 use clsmap::geometry::{CogLine, ExtractionConfig, Pose2, extract_lines};
+use clsmap::input::open_log;
 use clsmap::localize::global::{GlobalConfig, GlobalMap, global_localize};
 use clsmap::map::cls::{ClsMap, ClsMapConfig};
+use clsmap::pipeline::Mapper;
+use clsmap::pipeline::config::MapperConfig;
 use clsmap::sim::{ROOM_WITH_BOXES_TOUR, Rng, ScanSpec, World, cast_scan};
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 
@@ -38,6 +44,25 @@ fn room_lines(world: &World) -> Vec<CogLine> {
         }
     }
     map.actual_segments().map(|s| s.line).collect()
+}
+
+/// The walls of the whole CSAIL log's map and the lines of its scan 1,000
+/// (robot frame), if the log is there.
+fn csail() -> Option<(Vec<CogLine>, Vec<CogLine>)> {
+    let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/datasets/mit-csail/mit-csail.clf");
+    let records = open_log(&path).ok()?.collect::<Result<Vec<_>, _>>().ok()?;
+    let config = MapperConfig::default();
+    let mut mapper = Mapper::new(config);
+    mapper.defer_cls_rebuild();
+    for r in &records {
+        mapper.process(r);
+    }
+    mapper.settle();
+    let walls = mapper.contents().walls.iter().map(|w| w.line).collect();
+    let scan = &records.get(1000)?.scan;
+    let lines = extract_lines(scan, &config.laser_mount, &config.extraction);
+    Some((walls, lines))
 }
 
 /// `lines` copied onto an `nx` × `ny` grid of rooms 9 m × 7 m apart.
@@ -85,6 +110,18 @@ fn bench_global(c: &mut Criterion) {
         group.bench_with_input(id, &map, |b, map| {
             b.iter(|| black_box(global_localize(black_box(&local), map, &cfg).map(|r| r.ambiguous)))
         });
+    }
+    match csail() {
+        Some((walls, local)) => {
+            let map = GlobalMap::new(walls);
+            let id = BenchmarkId::new("csail_map_segments", map.len());
+            group.bench_with_input(id, &map, |b, map| {
+                b.iter(|| {
+                    black_box(global_localize(black_box(&local), map, &cfg).map(|r| r.ambiguous))
+                })
+            });
+        }
+        None => eprintln!("CSAIL log not found: no CSAIL case"),
     }
     group.finish();
 }

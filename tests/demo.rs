@@ -230,6 +230,17 @@ fn the_live_view_serves_the_running_daemon_to_scripts() {
         std::thread::sleep(std::time::Duration::from_millis(200));
     }
     assert_eq!(post(address, "/api/control/resume", Some(TOKEN)), 202);
+    // A pose hint needs its three numbers (a new map then refuses it in
+    // the loop, with a warning: its frame is where the robot started).
+    assert_eq!(post(address, "/api/control/pose?x=1&y=2", Some(TOKEN)), 400);
+    assert_eq!(
+        post(address, "/api/control/pose?x=1&y=2&theta=0", None),
+        401
+    );
+    assert_eq!(
+        post(address, "/api/control/pose?x=1&y=2&theta=0", Some(TOKEN)),
+        202
+    );
 
     // Three streams that never read take every client slot: the next
     // request is refused, not queued, and the loop goes on meanwhile.

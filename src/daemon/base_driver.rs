@@ -42,6 +42,7 @@ pub struct BaseDriver {
     last_warning: f64,
     odometry_refused: u64,
     last_health: Option<Health>,
+    pose_hint: Option<Pose2>,
 }
 
 impl std::fmt::Debug for BaseDriver {
@@ -84,6 +85,7 @@ impl BaseDriver {
             last_warning: f64::NEG_INFINITY,
             odometry_refused: 0,
             last_health: None,
+            pose_hint: None,
         }
     }
 
@@ -124,8 +126,15 @@ impl BaseDriver {
         healthy && !self.guard.must_stop(last_odometry, now)
     }
 
+    /// The newest pose hint (map frame) the base passed on since the last
+    /// call, if any.
+    pub fn take_pose_hint(&mut self) -> Option<Pose2> {
+        self.pose_hint.take()
+    }
+
     /// Connects when due, moves the adapter's clock, hands new odometry to
-    /// `live`, and drops a failed base (to connect again later).
+    /// `live`, keeps the newest pose hint, and drops a failed base (to
+    /// connect again later).
     pub fn poll(&mut self, now: f64, live: &mut LiveMapper) {
         self.connect_if_due(now, live);
         let Some(base) = self.adapter.as_mut() else {
@@ -137,6 +146,9 @@ impl BaseDriver {
             if !live.on_odometry(sample.t, Pose2::new(p.x, p.y, p.theta)) {
                 self.odometry_refused += 1;
             }
+        }
+        if let Some(h) = base.pose_hint() {
+            self.pose_hint = Some(Pose2::new(h.x, h.y, h.theta));
         }
         let health = base.health();
         if self.last_health.as_ref() != Some(&health) {

@@ -22,8 +22,9 @@ pub struct Checkpoint {
     pub dir: PathBuf,
     /// Poses since the last checkpoint written, appended to the trajectory.
     pub trajectory: Vec<StampedPose>,
-    /// The map as [`crate::map::file`] stores it.
-    pub map: MapContents,
+    /// The map as [`crate::map::file`] stores it; none when it did not
+    /// change (localizing in a loaded map): the poses only.
+    pub map: Option<MapContents>,
     /// The path drawn on the picture.
     pub path: Vec<Pose2>,
 }
@@ -53,7 +54,12 @@ impl Checkpoint {
             return Err(fail(error, self.trajectory));
         }
         // The poses are on disk now; a failure below keeps none back.
-        write_maps(&self.dir, &self.map, &self.path, &[]).map_err(|e| fail(e, Vec::new()))
+        match &self.map {
+            Some(map) => {
+                write_maps(&self.dir, map, &self.path, &[]).map_err(|e| fail(e, Vec::new()))
+            }
+            None => Ok(()),
+        }
     }
 }
 

@@ -87,6 +87,15 @@ pub struct MapSection {
     /// building is the worse failure) or `"new"` (warn, start a new map).
     /// Default `"refuse"`.
     pub on_bad_map: String,
+    /// While the robot is looked for in the loaded map (at the start,
+    /// after it was lost, after a pose hint), the base turns in place at
+    /// this rate (rad/s), so the scans see more of the place and tell
+    /// look-alike places apart; 0 = it stands still. Default 0.3.
+    pub turn_rate: f64,
+    /// Longest time (s) the base turns for one search; then it stops and
+    /// waits (status LOST) until a scan or a pose hint settles it.
+    /// Default 30 (a turn and a half at the default rate).
+    pub turn_for: f64,
 }
 
 impl Default for MapSection {
@@ -95,6 +104,8 @@ impl Default for MapSection {
             load: None,
             mode: "localize".into(),
             on_bad_map: "refuse".into(),
+            turn_rate: 0.3,
+            turn_for: 30.0,
         }
     }
 }
@@ -438,6 +449,8 @@ impl DaemonConfig {
                 "\"localize\" or \"extend\"",
             ));
         }
+        within("map.turn_rate", self.map.turn_rate, 0.0, b.max_turn_rate)?;
+        within("map.turn_for", self.map.turn_for, 0.0, 3600.0)?;
         if !matches!(self.map.on_bad_map.as_str(), "refuse" | "new") {
             return Err(range(
                 "map.on_bad_map",

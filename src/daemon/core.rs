@@ -25,6 +25,7 @@ use super::checkpoint::{Checkpoint, CheckpointFailed};
 use super::config::DaemonConfig;
 use super::live::{LiveMapper, LiveStatus};
 use super::web::{ControlCommand, LiveView, MapView};
+use crate::geometry::Pose2;
 use crate::graph::{OptimisationJob, OptimisationResult};
 use crate::input::lms200::range_scan;
 use crate::pipeline::{MapSearch, PipelineError, ScanOutcome};
@@ -124,6 +125,10 @@ pub struct Core {
     last_view_t: f64,
     /// Optimisations taken in so far (each moves the whole map).
     optimisations: u64,
+    /// When the current search for the robot in a loaded map began (s).
+    search_began: Option<f64>,
+    /// The search ran out of turning time: the robot waits, stopped.
+    search_waiting: bool,
 }
 
 /// What makes the map look different: counts that change with it.
@@ -184,6 +189,8 @@ impl Core {
             scans_at_last_view: 0,
             last_view_t: 0.0,
             optimisations: 0,
+            search_began: None,
+            search_waiting: false,
         }
     }
 
@@ -224,12 +231,16 @@ impl Core {
         scan: &lms200::Scan,
         queued: Option<Duration>,
     ) -> Option<ScanOutcome> {
-        self.base.poll(now, &mut self.live);
+        self.poll_base(now);
         let scan = range_scan(scan, t, self.mode)?;
         let outcome = self.live.on_scan(scan, queued);
         if self.first_scan_after.is_none() {
             self.first_scan_after = Some(now);
-            info!(after_s = now, "first scan mapped; ready");
+        }
+        // Ready once the robot has a pose: at the first scan in a new map,
+        // once found in a loaded one (or at `ready_after`, see `control`).
+        if !self.ready_sent && self.live.mapper().map_search().is_none() {
+            info!(after_s = now, "first scan localized; ready");
             self.ready();
         }
         if self.silence_logged {
@@ -292,6 +303,34 @@ impl Core {
                 self.paused = true;
                 self.base.stop(now);
             }
+            ControlCommand::Pose(pose) => self.handle_pose_hint(now, pose, "the live view"),
+        }
+    }
+
+    /// Odometry and health from the base, and its pose hint if it sent one.
+    fn poll_base(&mut self, now: f64) {
+        self.base.poll(now, &mut self.live);
+        if let Some(pose) = self.base.take_pose_hint() {
+            self.handle_pose_hint(now, pose, "the base link");
+        }
+    }
+
+    /// A pose hint (map frame) from `from` at `now`: the search for the
+    /// robot in the loaded map starts again from it.
+    pub fn handle_pose_hint(&mut self, now: f64, pose: Pose2, from: &str) {
+        match self.live.hint_pose(now, pose) {
+            Ok(()) => {
+                info!(
+                    x = pose.x,
+                    y = pose.y,
+                    theta = pose.theta,
+                    "pose hint from {from}: looking for the robot there"
+                );
+                // A new search: the base may turn for it again.
+                self.search_began = None;
+                self.search_waiting = false;
+            }
+            Err(e) => warn!("pose hint from {from} refused: {e}"),
         }
     }
 
@@ -307,7 +346,7 @@ impl Core {
     /// Snapshots for the live view: the panel's every time, the map's when
     /// it changed (at most every [`MAP_VIEW_EVERY`]).
     fn take_views(&mut self, now: f64) {
-        let status = self.live.status();
+        let status = self.live_status();
         let key = MapKey {
             keyframes: status.keyframes,
             walls: status.walls,
@@ -371,17 +410,21 @@ impl Core {
     /// Polls and commands the base; notes why to stop, if it is time.
     fn control(&mut self, now: f64, manual: Option<Twist>) {
         let _span = info_span!("control").entered();
-        if self.first_scan_after.is_none()
-            && now >= self.config.daemon.ready_after
-            && !self.ready_sent
-        {
+        if now >= self.config.daemon.ready_after && !self.ready_sent {
             self.ready();
-            warn!(
-                after_s = now,
-                "no scan yet: ready anyway, still waiting for the sensor"
-            );
+            if self.first_scan_after.is_none() {
+                warn!(
+                    after_s = now,
+                    "no scan yet: ready anyway, still waiting for the sensor"
+                );
+            } else {
+                warn!(
+                    after_s = now,
+                    "not found in the loaded map yet: ready anyway, still looking"
+                );
+            }
         }
-        self.base.poll(now, &mut self.live);
+        self.poll_base(now);
         let sensor_ok = self.sensor_ok(now);
         if !sensor_ok && self.last_scan_at.is_some() && !self.silence_logged {
             warn!(
@@ -390,17 +433,30 @@ impl Core {
             );
             self.silence_logged = true;
         }
-        // A robot not (or no longer) found in a loaded map does not drive;
-        // one paused from the live view is held.
-        let placed = self.live.mapper().map_search().is_none();
+        // A robot not (or no longer) found in a loaded map does not drive
+        // but turns in place for a while, so its scans see more of the
+        // place; one paused from the live view is held.
+        let turning = self.turning(now);
+        let placed = self.search_began.is_none();
         let manual = if self.paused {
             self.live.hold_exploration(now);
             Some(Twist::ZERO)
+        } else if manual.is_none() && turning {
+            self.live.hold_exploration(now);
+            Some(Twist {
+                vx: 0.0,
+                vy: 0.0,
+                omega: self.config.map.turn_rate,
+            })
         } else {
             manual
         };
-        self.base
-            .control(&mut self.live, sensor_ok && placed, now, manual);
+        self.base.control(
+            &mut self.live,
+            sensor_ok && (placed || turning),
+            now,
+            manual,
+        );
         if self.stop.is_none() {
             let limit = self.config.daemon.max_run_time;
             self.stop =
@@ -412,8 +468,34 @@ impl Core {
         }
     }
 
+    /// Follows the search for the robot in a loaded map; whether the base
+    /// is to turn in place at `now` (s) for it.
+    fn turning(&mut self, now: f64) -> bool {
+        if self.live.mapper().map_search().is_none() {
+            self.search_began = None;
+            self.search_waiting = false;
+            return false;
+        }
+        let began = *self.search_began.get_or_insert(now);
+        self.search_waiting = now - began >= self.config.map.turn_for;
+        self.config.map.turn_rate > 0.0 && !self.search_waiting
+    }
+
+    /// The mapper's status; a search for the robot that has run longer
+    /// than the base may turn for it counts as lost (the robot waits,
+    /// stopped, until a scan or a pose hint settles it).
+    fn live_status(&self) -> LiveStatus {
+        let mut status = self.live.status();
+        if self.search_waiting
+            && let Some(MapSearch::Finding(n)) = status.map_search
+        {
+            status.map_search = Some(MapSearch::Lost(n));
+        }
+        status
+    }
+
     fn status_tick(&mut self, now: f64) {
-        let status = self.live.status();
+        let status = self.live_status();
         let rate = (status.scans - self.scans_at_last_status) as f64
             / (now - self.last_status_t).max(1e-3);
         self.scans_at_last_status = status.scans;
@@ -581,7 +663,7 @@ impl Core {
     }
 
     pub fn status(&self) -> LiveStatus {
-        self.live.status()
+        self.live_status()
     }
 }
 

@@ -22,7 +22,7 @@ use crate::geometry::{Pose2, RangeScan};
 use crate::input::ScanRecord;
 use crate::input::odometry::OdometryTrack;
 use crate::pipeline::config::MapperConfig;
-use crate::pipeline::{Mapper, PipelineError, ScanOutcome};
+use crate::pipeline::{MapMode, Mapper, PipelineError, ScanOutcome};
 
 /// How far (s) odometry is extrapolated past its newest sample to a scan's
 /// time: bases report at 10–50 Hz, so a scan often lies up to one period
@@ -283,6 +283,13 @@ impl LiveMapper {
         outcome
     }
 
+    /// A pose hint (map frame) for the robot now (`now`, s on the daemon's
+    /// clock): see [`Mapper::hint_pose`].
+    pub fn hint_pose(&mut self, now: f64, pose: Pose2) -> Result<(), PipelineError> {
+        let odometry = self.odometry_at(now);
+        self.mapper.hint_pose(pose, odometry)
+    }
+
     /// The path drawn on the map's picture (map frame), oldest first.
     pub fn picture_path(&self) -> impl ExactSizeIterator<Item = &Pose2> + '_ {
         self.picture_path.iter()
@@ -358,14 +365,20 @@ impl LiveMapper {
 
     /// A snapshot for a checkpoint into `dir`: the poses since the last
     /// one (the mapper forgets them, so memory stays bounded however long
-    /// the daemon runs), the maps and the picture's path.
+    /// the daemon runs), the maps and the picture's path. Localizing in a
+    /// loaded map, which does not change, it holds the poses only.
     pub fn begin_checkpoint(&mut self, dir: &Path) -> Checkpoint {
+        let with_map = self.mapper.map_mode() != Some(MapMode::Localize);
+        self.snapshot(dir, with_map)
+    }
+
+    fn snapshot(&mut self, dir: &Path, with_map: bool) -> Checkpoint {
         let mut trajectory = std::mem::take(&mut self.unwritten);
         trajectory.extend(self.mapper.take_trajectory());
         Checkpoint {
             dir: dir.to_owned(),
             trajectory,
-            map: self.mapper.contents(),
+            map: with_map.then(|| self.mapper.contents()),
             path: self.picture_path.iter().copied().collect(),
         }
     }
@@ -379,10 +392,12 @@ impl LiveMapper {
         failed.error
     }
 
-    /// Writes a checkpoint into `dir` now (see [`Checkpoint::write`]).
+    /// Writes a checkpoint into `dir` now, the map included whatever the
+    /// mode (the last save, so a run's directory holds the map it ended
+    /// with; see [`Checkpoint::write`]).
     pub fn checkpoint(&mut self, dir: &Path) -> Result<(), PipelineError> {
         let _span = info_span!("checkpoint").entered();
-        self.begin_checkpoint(dir)
+        self.snapshot(dir, true)
             .write()
             .map_err(|failed| self.checkpoint_failed(failed))
     }

@@ -303,6 +303,18 @@ impl VirtualRobot {
         self.core.checkpoint(dir)
     }
 
+    /// A pose hint (map frame) now, as the base link or the live view
+    /// passes one on.
+    pub fn hint_pose(&mut self, pose: Pose2) {
+        self.core.handle_pose_hint(self.now, pose, "the test");
+    }
+
+    /// Carries the robot to `pose` (world frame) now, its odometry unaware.
+    pub fn kidnap(&mut self, pose: Pose2) {
+        self.robot.kidnap(pose);
+        self.last_truth = None;
+    }
+
     /// Stops the base (the robot coasts to a halt within its limits).
     pub fn stop_base(&mut self) {
         self.core.stop_base(self.now);

@@ -25,7 +25,6 @@
 use crate::geometry::{CogLine, Pose2, wrap_angle};
 use crate::localize::global::{GlobalConfig, GlobalMap, global_localize};
 use crate::localize::{LocalizerConfig, localize};
-use crate::map::cls::LocalRegion;
 use crate::map::{Edge, EdgeKind, Keyframe, SegmentMap, SegmentMapConfig};
 use nalgebra::{Matrix2, Matrix3};
 use serde::{Deserialize, Serialize};
@@ -310,28 +309,6 @@ fn reference_map(
     map
 }
 
-/// Length (m) of `lines` (map frame) lying inside `region` (map frame) by
-/// more than `tolerance`, sampled every 5 cm.
-fn length_in_free_space(lines: &[CogLine], region: &LocalRegion, tolerance: f64) -> f64 {
-    let mut inside = 0.0;
-    for l in lines {
-        let len = l.length();
-        let n = ((len / 0.05).ceil() as usize).max(1);
-        let step = len / n as f64;
-        for k in 0..n {
-            let f = (k as f64 + 0.5) / n as f64;
-            let p = [
-                l.start[0] + f * (l.end[0] - l.start[0]),
-                l.start[1] + f * (l.end[1] - l.start[1]),
-            ];
-            if region.strictly_contains(p, tolerance) {
-                inside += step;
-            }
-        }
-    }
-    inside
-}
-
 /// Wall length of each view standing in the other's free space (m).
 fn free_space_conflict(
     current: &Keyframe,
@@ -344,7 +321,7 @@ fn free_space_conflict(
     if let Some(region) = &reference.region {
         let region = region.transformed(reference_pose);
         let lines: Vec<CogLine> = current.lines.iter().map(|l| l.transformed(pose)).collect();
-        total += length_in_free_space(&lines, &region, tolerance);
+        total += region.length_inside(&lines, tolerance);
     }
     if let Some(region) = &current.region {
         let region = region.transformed(pose);
@@ -353,7 +330,7 @@ fn free_space_conflict(
             .iter()
             .map(|l| l.transformed(reference_pose))
             .collect();
-        total += length_in_free_space(&lines, &region, tolerance);
+        total += region.length_inside(&lines, tolerance);
     }
     total
 }

@@ -10,7 +10,7 @@ use tracing::{debug, trace_span, warn};
 use super::offline::SKIPPED_EXAMPLES;
 use super::prediction::{MotionPredictor, OdometryFeed, OdometryReading};
 use super::rejection::{Rejection, RejectionKind};
-use super::start::{MapMode, StartSearch};
+use super::start::{HINT_COVARIANCE, MapMode, StartSearch};
 use super::summary::{LastScanTimes, MappingSummary, StageClocks};
 use super::{MapSearch, PipelineError, ScanOutcome};
 use crate::files::trajectory::StampedPose;
@@ -82,6 +82,8 @@ pub struct Mapper {
     /// that runs once there are [`LOST_AFTER_SCANS`].
     lost_scans: usize,
     relocalizer: Option<StartSearch>,
+    /// A pose hint restarted the search (see [`Self::hint_pose`]).
+    hinted: bool,
     /// The last scan's pose covariance (x, y, θ; m², m·rad, rad²).
     last_covariance: [[f64; 3]; 3],
     pub(super) summary: MappingSummary,
@@ -121,6 +123,7 @@ impl Mapper {
             first_session_keyframe: false,
             lost_scans: 0,
             relocalizer: None,
+            hinted: false,
             last_covariance: [[0.0; 3]; 3],
             summary: MappingSummary::default(),
             clocks: StageClocks::default(),
@@ -449,6 +452,44 @@ impl Mapper {
         )
     }
 
+    /// A pose hint from outside: the robot is at `pose` (map frame) now,
+    /// when the odometry reads `odometry`. In a loaded map the search for
+    /// the robot starts again from it (scans have no pose until the hint is
+    /// confirmed by local localization, or, failing that, by global
+    /// localization); a new map refuses it, since its frame is where the
+    /// robot started.
+    pub fn hint_pose(&mut self, pose: Pose2, odometry: Option<Pose2>) -> Result<(), PipelineError> {
+        if ![pose.x, pose.y, pose.theta].iter().all(|v| v.is_finite()) {
+            return Err(PipelineError::BadHint(pose));
+        }
+        if self.mode.is_none() {
+            return Err(PipelineError::HintWithoutMap);
+        }
+        let walls = self.map.index().iter().map(|(_, l)| *l);
+        let odometry =
+            odometry.filter(|p| p.x.is_finite() && p.y.is_finite() && p.theta.is_finite());
+        self.start = Some(StartSearch::hinted(
+            walls,
+            GlobalConfig::default(),
+            pose,
+            HINT_COVARIANCE,
+            odometry,
+        ));
+        self.relocalizer = None;
+        self.lost_scans = 0;
+        self.summary.pose_hints += 1;
+        self.hinted = true;
+        // Wherever it is found, the next keyframe is tied to the old map by
+        // a loop edge, not chained to the last one across the jump.
+        self.first_session_keyframe |= self.mode == Some(MapMode::Extend);
+        Ok(())
+    }
+
+    /// The mode of a loaded map; `None` for a new map.
+    pub fn map_mode(&self) -> Option<MapMode> {
+        self.mode
+    }
+
     /// Where the robot stands in a loaded map: `None` for a new map or
     /// once found (and not lost); else the search's hypotheses so far.
     pub fn map_search(&self) -> Option<MapSearch> {
@@ -533,7 +574,8 @@ impl Mapper {
                 &self.config.extraction,
                 &mut self.lines,
             );
-            match search.step(&self.lines, odometry) {
+            let free = local_region(&self.lines, &record.scan, &self.cls.config().local).ok();
+            match search.step(&self.lines, free.as_ref(), odometry) {
                 Some(found) => {
                     debug!(t = record.scan.t, pose = ?found.0, "found in the map");
                     self.start = None;
@@ -565,6 +607,8 @@ impl Mapper {
         });
         // The first scan after the robot was found in a loaded map starts
         // from where it was found.
+        // Found after a hint mid-run: the step to here is a jump.
+        let seeded = self.seed.is_some() && std::mem::take(&mut self.hinted);
         let (predicted, predicted_cov) = match self.seed.take() {
             Some(found) => found,
             None => (prediction.pose, prediction.cov),
@@ -654,7 +698,7 @@ impl Mapper {
         // map for a while (pushed aside, or drifted through a stretch the
         // map shows little of) is looked for again by global localization
         // while it goes on; once one place remains, that is its pose.
-        let mut relocated = false;
+        let mut relocated = seeded;
         if self.mode.is_some() {
             if outcome.localized && !outcome.by_previous_scan {
                 self.lost_scans = 0;
@@ -672,8 +716,11 @@ impl Mapper {
             }
             // A search costs milliseconds on a large map: every few scans.
             let due = self.lost_scans.is_multiple_of(RELOCALIZE_EVERY_SCANS);
+            let free = due
+                .then(|| local_region(&self.lines, &record.scan, &self.cls.config().local).ok())
+                .flatten();
             if let Some(search) = self.relocalizer.as_mut().filter(|_| due)
-                && let Some((pose, found_cov)) = search.step(&self.lines, odometry)
+                && let Some((pose, found_cov)) = search.step(&self.lines, free.as_ref(), odometry)
             {
                 debug!(t = record.scan.t, ?pose, "found in the map again");
                 self.relocalizer = None;
@@ -689,6 +736,12 @@ impl Mapper {
             }
         }
 
+        // In a loaded map, a scan not localized against it, or taken while
+        // the robot is lost, teaches the map nothing: its pose may be
+        // anywhere.
+        if self.mode.is_some() {
+            may_update_map &= outcome.localized && self.relocalizer.is_none();
+        }
         // Nor does an unlocalized pose predicted without fresh odometry:
         // constant velocity is a guess, and frozen odometry happens in
         // fast turns, where a wrong heading misplaces walls the most.

@@ -79,6 +79,12 @@ pub enum PipelineError {
     Store(#[from] crate::map::cls::StoreError),
     #[error("cannot start from the map: {0}")]
     StartMap(String),
+    #[error(
+        "a pose hint is taken in a loaded map only (run --map): a new map's frame starts where the robot started"
+    )]
+    HintWithoutMap,
+    #[error("the pose hint is not a finite pose: {0:?}")]
+    BadHint(Pose2),
 }
 
 /// What happened to one scan.

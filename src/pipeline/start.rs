@@ -5,13 +5,23 @@
 //! rooms), each next scan narrows the hypotheses with the odometry between
 //! them (`disambiguate`), until one place remains. Scans before that have
 //! no pose in the map.
+//!
+//! A pose hint from outside (an operator's "2D pose estimate", a base's
+//! `POSE` line) starts the search from that one hypothesis instead: the
+//! next scan is localized locally from it, and only when that fails does
+//! the search fall back to global localization.
 
 use std::str::FromStr;
 
-use crate::geometry::{CogLine, Pose2};
+use crate::geometry::{CogLine, Pose2, wrap_angle};
 use crate::localize::global::{
-    GlobalConfig, GlobalMap, GlobalResult, disambiguate, global_localize,
+    GlobalConfig, GlobalMap, GlobalResult, Hypothesis, disambiguate, global_localize, refute,
 };
+use crate::map::cls::LocalRegion;
+
+/// Uncertainty of a pose hint: σ 0.5 m in x and y and 15° in heading (an
+/// operator's click on a map; RViz's "2D Pose Estimate" sends the same).
+pub const HINT_COVARIANCE: [[f64; 3]; 3] = [[0.25, 0.0, 0.0], [0.0, 0.25, 0.0], [0.0, 0.0, 0.0685]];
 
 /// What a mapper started from a saved map does with it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -36,6 +46,11 @@ impl FromStr for MapMode {
     }
 }
 
+/// Hypotheses a start search holds at most: a square room has four
+/// alike headings, and a floor with two alike rooms eight; the default of
+/// global localization (five) would cut the right one off among them.
+const START_HYPOTHESES: usize = 12;
+
 /// The search for the start pose.
 #[derive(Debug)]
 pub struct StartSearch {
@@ -43,38 +58,124 @@ pub struct StartSearch {
     config: GlobalConfig,
     /// The hypotheses so far and the odometry at their scan.
     last: Option<(GlobalResult, Option<Pose2>)>,
+    /// Started from a hint given without odometry: the robot is taken to
+    /// stand where it was told until a scan settles it.
+    hinted_still: bool,
 }
 
 impl StartSearch {
     pub fn new(walls: impl IntoIterator<Item = CogLine>, config: GlobalConfig) -> Self {
         StartSearch {
             map: GlobalMap::new(walls),
-            config,
+            config: GlobalConfig {
+                max_hypotheses: config.max_hypotheses.max(START_HYPOTHESES),
+                ..config
+            },
             last: None,
+            hinted_still: false,
         }
     }
 
-    /// One scan's lines (robot frame) and its odometry: the start pose and
-    /// its covariance once one place remains, else `None` (hypotheses kept
-    /// for the next scan).
+    /// A search that starts from `pose` (map frame) with `covariance`, told
+    /// when the odometry read `odometry`.
+    pub fn hinted(
+        walls: impl IntoIterator<Item = CogLine>,
+        config: GlobalConfig,
+        pose: Pose2,
+        covariance: [[f64; 3]; 3],
+        odometry: Option<Pose2>,
+    ) -> Self {
+        let hint = Hypothesis {
+            pose,
+            covariance,
+            score: 0.0,
+            last_matched: 0.0,
+            votes: 0.0,
+            refined: false,
+            degenerate: None,
+        };
+        let result = GlobalResult {
+            hypotheses: vec![hint],
+            ambiguous: true,
+        };
+        StartSearch {
+            map: GlobalMap::new(walls),
+            config: GlobalConfig {
+                max_hypotheses: config.max_hypotheses.max(START_HYPOTHESES),
+                ..config
+            },
+            last: Some((result, odometry)),
+            hinted_still: odometry.is_none(),
+        }
+    }
+
+    /// One scan's lines (robot frame), its free space (the local region,
+    /// robot frame, when the scan gave one) and its odometry: the start
+    /// pose and its covariance once one place remains, else `None`
+    /// (hypotheses kept for the next scan).
     pub fn step(
         &mut self,
         lines: &[CogLine],
+        free: Option<&LocalRegion>,
         odometry: Option<Pose2>,
     ) -> Option<(Pose2, [[f64; 3]; 3])> {
-        let result = match (&self.last, odometry) {
-            (Some((previous, Some(before))), Some(now)) => disambiguate(
-                previous,
-                lines,
-                before.between(&now),
-                &self.map,
-                &self.config,
-            ),
-            _ => global_localize(lines, &self.map, &self.config),
+        let motion = match (&self.last, odometry) {
+            (Some((previous, Some(before))), Some(now)) => Some((previous, before.between(&now))),
+            (Some((previous, None)), None) if self.hinted_still => {
+                Some((previous, Pose2::IDENTITY))
+            }
+            _ => None,
         };
+        self.hinted_still = false;
+        let result = match motion {
+            Some((previous, motion)) => {
+                disambiguate(previous, lines, motion, &self.map, &self.config)
+            }
+            None => global_localize(lines, &self.map, &self.config),
+        };
+        let result = match (result, free) {
+            (Ok(r), Some(free)) => Ok(refute(r, free, &self.map, &self.config)),
+            (result, _) => result,
+        };
+        // A full set whose last place scores like the best may have left
+        // out more alike places, the right one among them: it is not
+        // narrowed down (its survivors could all be wrong), and the next
+        // scan searches afresh.
+        let result = result.map(|r| {
+            let full = r.hypotheses.len() >= self.config.max_hypotheses;
+            let alike = match (r.hypotheses.first(), r.hypotheses.last()) {
+                (Some(best), Some(last)) => last.score >= self.config.ambiguity_ratio * best.score,
+                _ => false,
+            };
+            if full && alike {
+                GlobalResult {
+                    hypotheses: Vec::new(),
+                    ambiguous: true,
+                }
+            } else {
+                r
+            }
+        });
+        let tracked = motion.is_some();
         match result {
             Ok(r) if !r.ambiguous => {
                 let best = r.best()?;
+                // Narrowed down to one place: the scan that did it, searched
+                // afresh, must find that place too. Otherwise the tracked
+                // places never held the right one (it showed only now), and
+                // the search goes on from this scan's.
+                if tracked && let Some(fresh) = self.fresh(lines, free) {
+                    let agrees = fresh.hypotheses.iter().any(|h| {
+                        (h.pose.x - best.pose.x).hypot(h.pose.y - best.pose.y)
+                            <= 2.0 * self.config.cluster_distance
+                            && wrap_angle(h.pose.theta - best.pose.theta).abs()
+                                <= 2.0 * self.config.cluster_angle
+                    });
+                    if !agrees {
+                        self.last = Some((fresh, odometry));
+                        return None;
+                    }
+                }
                 Some((best.pose, best.covariance))
             }
             Ok(r) if !r.hypotheses.is_empty() => {
@@ -88,6 +189,16 @@ impl StartSearch {
                 None
             }
         }
+    }
+
+    /// This scan's places from a fresh global localization, refuted by its
+    /// free space; `None` when the search gives nothing.
+    fn fresh(&self, lines: &[CogLine], free: Option<&LocalRegion>) -> Option<GlobalResult> {
+        let r = global_localize(lines, &self.map, &self.config).ok()?;
+        Some(match free {
+            Some(free) => refute(r, free, &self.map, &self.config),
+            None => r,
+        })
     }
 
     /// Hypotheses held now.

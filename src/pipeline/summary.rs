@@ -143,6 +143,8 @@ pub struct MappingSummary {
     pub scans_before_start: usize,
     /// Times the robot was found again in a loaded map after it was lost.
     pub relocalizations: usize,
+    /// Pose hints taken (each restarts the search for the robot).
+    pub pose_hints: usize,
     /// Keyframes whose CLS map update was refused (the map kept as it was).
     pub cls_rejected: usize,
     /// Scans that carried no odometry.

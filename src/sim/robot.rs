@@ -112,6 +112,20 @@ impl SimRobot {
         self.lock().base.set_odometry_frozen(frozen);
     }
 
+    /// Fault injection: the robot is carried to `pose` (world frame) at
+    /// once, its odometry unaware (a kidnap); scans after now see it there.
+    pub fn kidnap(&self, pose: Pose2) {
+        let mut shared = self.lock();
+        shared
+            .base
+            .teleport(BasePose::new(pose.x, pose.y, pose.theta));
+        let last = shared.history.back().map(|(t, _)| *t);
+        shared.history.clear();
+        if let Some(t) = last {
+            shared.history.push_back((t, pose));
+        }
+    }
+
     /// The velocity the base executes now, after its limits (robot frame).
     pub fn applied_twist(&self) -> Twist {
         self.lock().base.applied_twist()

@@ -1,6 +1,7 @@
 //! `clsmap run`: the daemon as systemd runs it, driven by signals.
 
 use super::*;
+use clsmap::daemon::simulation::VirtualRobot;
 
 /// A running `clsmap run`, its stderr lines arriving on a channel.
 pub(super) struct Daemon {
@@ -11,8 +12,14 @@ pub(super) struct Daemon {
 
 impl Daemon {
     pub(super) fn start(config: &Path) -> Daemon {
+        Daemon::start_with(config, &[])
+    }
+
+    /// `clsmap run --config CONFIG` with more arguments.
+    pub(super) fn start_with(config: &Path, more: &[&str]) -> Daemon {
         let mut child = clsmap_command()
             .args(["run", "--config", arg(config)])
+            .args(more)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -128,7 +135,7 @@ fn run_reloads_on_sighup_and_stops_cleanly_on_sigterm_leaving_a_loadable_map() {
     let dir = TempDir::new("run-sigterm");
     let config = demo_run_config(&dir, "");
     let mut daemon = Daemon::start(&config);
-    daemon.wait_for("first scan mapped", Duration::from_secs(60));
+    daemon.wait_for("first scan localized", Duration::from_secs(60));
     daemon.wait_for("exploration: goal reached", Duration::from_secs(60));
     // A tunable change is applied; a change of the sensor needs a restart.
     let text = std::fs::read_to_string(&config).unwrap();
@@ -168,6 +175,67 @@ fn run_reloads_on_sighup_and_stops_cleanly_on_sigterm_leaving_a_loadable_map() {
     map.check_invariants().unwrap();
     assert!(map.actual_segments().count() > 3, "{stderr}");
     assert!(run.join("map.svg").is_file() && run.join("trajectory.tum").is_file());
+}
+
+/// The morning after, as a process: `clsmap run --map saved --mode
+/// localize` finds the robot in the saved map, checkpoints only its path
+/// while it runs, and leaves the saved map byte for byte as it was after
+/// SIGTERM; the run's directory ends with the map and the path.
+#[test]
+fn run_with_a_saved_map_localizes_and_leaves_the_map_untouched_on_sigterm() {
+    let dir = TempDir::new("run-localize");
+    // A map of the lab's start area, made on the virtual clock.
+    let mut robot = VirtualRobot::new(&clsmap::demo::demo_config().unwrap()).unwrap();
+    robot.run_until(15.0, |_| false);
+    let saved = dir.join("saved");
+    robot.checkpoint(&saved).unwrap();
+    let saved = saved.join("map.json");
+    let bytes = std::fs::read(&saved).unwrap();
+    let config = demo_run_config(&dir, "");
+    let mut daemon = Daemon::start_with(&config, &["--map", arg(&saved), "--mode", "localize"]);
+    daemon.wait_for("first scan localized", Duration::from_secs(60));
+    // Checkpoints (every second here) write the path, not the map.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let run = loop {
+        let state = dir.join("state");
+        let written = std::fs::read_dir(&state)
+            .ok()
+            .and_then(|mut d| d.next())
+            .and_then(Result::ok)
+            .map(|e| e.path())
+            .filter(|run| run.join("trajectory.tum").is_file());
+        if let Some(run) = written {
+            break run;
+        }
+        assert!(Instant::now() < deadline, "no checkpoint within 30 s");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(
+        !run.join("map.json").exists(),
+        "a localize run checkpointed the map"
+    );
+    daemon.signal("TERM");
+    let (status, _, stderr) = daemon.finish(Duration::from_secs(30));
+    assert!(status.success(), "{status}\n{stderr}");
+    assert_eq!(
+        std::fs::read(&saved).unwrap(),
+        bytes,
+        "the saved map changed"
+    );
+    let ended = clsmap::map::file::load(&run.join("map.json")).unwrap();
+    assert_eq!(
+        ended.contents.keyframes.len(),
+        clsmap::map::file::load(&saved)
+            .unwrap()
+            .contents
+            .keyframes
+            .len()
+    );
+    let poses = std::fs::read_to_string(run.join("trajectory.tum")).unwrap();
+    assert!(
+        poses.lines().filter(|l| !l.starts_with('#')).count() > 10,
+        "{poses}"
+    );
 }
 
 #[test]

@@ -53,6 +53,12 @@ pub trait BaseAdapter {
     fn stop(&mut self, now: f64) -> Result<(), BaseError>;
     /// Current health.
     fn health(&self) -> Health;
+    /// The newest pose hint (map frame) the base passed on and not yet
+    /// returned, if any: an operator's or a dock's "the robot is here".
+    /// Default: none.
+    fn pose_hint(&mut self) -> Option<BasePose> {
+        None
+    }
     /// Whether the link to the base is lost for good (a bridge that hung
     /// up, a port that vanished): the daemon then connects anew. A base
     /// that reports a fault over a working link is held, not reconnected,

@@ -161,6 +161,8 @@ pub struct LineBaseStats {
     pub odometry_out_of_order: u64,
     /// Lines that did not parse (including over-long ones).
     pub malformed_lines: u64,
+    /// Well-formed `POSE` lines received.
+    pub pose_hints: u64,
 }
 
 /// A base bridged by the line protocol over the stream `S`.
@@ -175,6 +177,8 @@ pub struct LineBase<S: LineStream> {
     now: Option<f64>,
     /// Newest sample not yet returned (stamped with the daemon clock).
     pending: Option<OdometrySample>,
+    /// Newest `POSE` hint not yet returned (map frame).
+    pose_hint: Option<BasePose>,
     /// Base-clock time of the newest accepted sample, s.
     last_base_t: Option<f64>,
     /// Text of the last `HEALTH FAULT`, until a `HEALTH OK`.
@@ -192,6 +196,7 @@ impl<S: LineStream> fmt::Debug for LineBase<S> {
             .field("link", &self.link)
             .field("now", &self.now)
             .field("pending", &self.pending)
+            .field("pose_hint", &self.pose_hint)
             .field("last_base_t", &self.last_base_t)
             .field("base_fault", &self.base_fault)
             .field("problem", &self.problem)
@@ -277,6 +282,7 @@ impl<S: LineStream> LineBase<S> {
             echo: Vec::new(),
             now: None,
             pending: None,
+            pose_hint: None,
             last_base_t: None,
             base_fault: None,
             problem: None,
@@ -368,6 +374,10 @@ impl<S: LineStream> LineBase<S> {
                     pose: BasePose::new(x, y, theta),
                 });
             }
+            Ok(BaseMessage::PoseHint { x, y, theta }) => {
+                self.stats.pose_hints += 1;
+                self.pose_hint = Some(BasePose::new(x, y, theta));
+            }
             Ok(BaseMessage::Health { ok: true, .. }) => self.base_fault = None,
             Ok(BaseMessage::Health { ok: false, text }) => self.base_fault = Some(text),
             Err(e) => {
@@ -415,6 +425,10 @@ impl<S: LineStream> BaseAdapter for LineBase<S> {
         let now = self.now?;
         self.pump(now);
         self.pending.take()
+    }
+
+    fn pose_hint(&mut self) -> Option<BasePose> {
+        self.pose_hint.take()
     }
 
     /// Sends `VEL`; a non-finite twist sends `STOP` and returns

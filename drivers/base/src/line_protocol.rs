@@ -12,6 +12,9 @@
 //!   `x`, `y` in m and `theta` in rad in the odometry frame. All finite.
 //! - `HEALTH OK [<text>]` or `HEALTH FAULT <text>`: health report; `text` is
 //!   free-form up to the end of the line.
+//! - `POSE <x> <y> <theta>`: a pose hint — the robot is here now, in the
+//!   *map* frame (m, m, rad), as an operator or a docking station knows
+//!   it; the host looks for the robot in its map from there. All finite.
 //!
 //! Host → base ([`encode_command`]):
 //! - `VEL <vx> <vy> <omega>`: robot-frame velocity, m/s, m/s, rad/s, to hold
@@ -40,6 +43,15 @@ pub enum BaseMessage {
     Odometry {
         /// Sample time, s.
         t: f64,
+        /// Position x, m.
+        x: f64,
+        /// Position y, m.
+        y: f64,
+        /// Heading, rad.
+        theta: f64,
+    },
+    /// A pose hint in the map frame: `x`, `y` m, `theta` rad.
+    PoseHint {
         /// Position x, m.
         x: f64,
         /// Position y, m.
@@ -185,33 +197,12 @@ fn parse_line(line: &[u8]) -> Result<Option<BaseMessage>, ProtocolError> {
     match keyword {
         "" => Ok(None),
         "ODOM" => {
-            const NAMES: [&str; 4] = ["t", "x", "y", "theta"];
-            let fields: Vec<&str> = rest.split([' ', '\t']).filter(|f| !f.is_empty()).collect();
-            if fields.len() != NAMES.len() {
-                return Err(ProtocolError::FieldCount {
-                    keyword: "ODOM",
-                    expected: NAMES.len(),
-                    found: fields.len(),
-                });
-            }
-            let mut v = [0.0; 4];
-            for ((slot, text), field) in v.iter_mut().zip(&fields).zip(NAMES) {
-                *slot = text
-                    .parse::<f64>()
-                    .ok()
-                    .filter(|x| x.is_finite())
-                    .ok_or_else(|| ProtocolError::BadNumber {
-                        keyword: "ODOM",
-                        field,
-                        text: truncate(text),
-                    })?;
-            }
-            Ok(Some(BaseMessage::Odometry {
-                t: v[0],
-                x: v[1],
-                y: v[2],
-                theta: v[3],
-            }))
+            let [t, x, y, theta] = numbers("ODOM", ["t", "x", "y", "theta"], rest)?;
+            Ok(Some(BaseMessage::Odometry { t, x, y, theta }))
+        }
+        "POSE" => {
+            let [x, y, theta] = numbers("POSE", ["x", "y", "theta"], rest)?;
+            Ok(Some(BaseMessage::PoseHint { x, y, theta }))
         }
         "HEALTH" => {
             let (status, text) = split_word(rest);
@@ -227,6 +218,35 @@ fn parse_line(line: &[u8]) -> Result<Option<BaseMessage>, ProtocolError> {
         }
         other => Err(ProtocolError::UnknownKeyword(truncate(other))),
     }
+}
+
+/// The `N` finite numbers named `names` that follow `keyword`.
+fn numbers<const N: usize>(
+    keyword: &'static str,
+    names: [&'static str; N],
+    rest: &str,
+) -> Result<[f64; N], ProtocolError> {
+    let fields: Vec<&str> = rest.split([' ', '\t']).filter(|f| !f.is_empty()).collect();
+    if fields.len() != N {
+        return Err(ProtocolError::FieldCount {
+            keyword,
+            expected: N,
+            found: fields.len(),
+        });
+    }
+    let mut v = [0.0; N];
+    for ((slot, text), field) in v.iter_mut().zip(&fields).zip(names) {
+        *slot = text
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| ProtocolError::BadNumber {
+                keyword,
+                field,
+                text: truncate(text),
+            })?;
+    }
+    Ok(v)
 }
 
 /// Limits echoed text in errors to 32 characters.
@@ -273,6 +293,37 @@ mod tests {
                 text: String::new()
             }))
         );
+        assert_eq!(d.poll(), None);
+    }
+
+    #[test]
+    fn a_pose_hint_is_three_finite_numbers() {
+        let mut d = LineDecoder::default();
+        d.push(b"POSE 1.5 -2 0.25\nPOSE 1 2\nPOSE 1 2 inf\n");
+        assert_eq!(
+            d.poll(),
+            Some(Ok(BaseMessage::PoseHint {
+                x: 1.5,
+                y: -2.0,
+                theta: 0.25
+            }))
+        );
+        assert_eq!(
+            d.poll(),
+            Some(Err(ProtocolError::FieldCount {
+                keyword: "POSE",
+                expected: 3,
+                found: 2
+            }))
+        );
+        assert!(matches!(
+            d.poll(),
+            Some(Err(ProtocolError::BadNumber {
+                keyword: "POSE",
+                field: "theta",
+                ..
+            }))
+        ));
         assert_eq!(d.poll(), None);
     }
 

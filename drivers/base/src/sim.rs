@@ -58,6 +58,12 @@ impl SimBase {
         self.odom_pose = pose;
     }
 
+    /// Fault injection: the robot is carried to `pose` (a kidnap); the
+    /// odometry does not notice.
+    pub fn teleport(&mut self, pose: BasePose) {
+        self.true_pose = pose;
+    }
+
     /// Ground-truth pose (m, m, rad).
     #[must_use]
     pub fn true_pose(&self) -> BasePose {

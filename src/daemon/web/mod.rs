@@ -110,11 +110,14 @@ impl MapView {
 }
 
 /// What the page may ask the loop to do (with the token).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum ControlCommand {
     /// Hold exploration; the base stops until resumed.
     Pause,
     Resume,
     /// Stop the base now (an emergency stop), and hold exploration.
     Stop,
+    /// The robot is here (map frame): look for it in the loaded map from
+    /// this pose (an operator's "2D pose estimate").
+    Pose(Pose2),
 }

@@ -3,7 +3,9 @@
 //! `/api/map` (the map file, version 2), `/api/geometry` (what the page
 //! draws), `/api/trajectory`, `/api/events` (server-sent events: `status`
 //! at the configured rate, `map` when the map changed), and, only with a
-//! token, `POST /api/control/{pause,resume,stop}`.
+//! token, `POST /api/control/{pause,resume,stop}` and
+//! `POST /api/control/pose?x=…&y=…&theta=…` (m, m, rad in the map frame:
+//! where to look for the robot in a loaded map).
 //!
 //! Read-only without a token. At most `max_clients` requests at once,
 //! streams included; more are refused with 503, never queued. One request
@@ -17,7 +19,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use axum::Router;
-use axum::extract::{Path, Request, State};
+use axum::extract::{Path, RawQuery, Request, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::sse::{Event, KeepAlive, Sse};
@@ -28,6 +30,7 @@ use tokio::sync::{Semaphore, mpsc, watch};
 use tracing::{error, info};
 
 use super::{ControlCommand, LiveView, MapView};
+use crate::geometry::Pose2;
 
 /// The page: one file, no outside resources.
 const PAGE: &str = include_str!("page.html");
@@ -468,6 +471,7 @@ fn authorized(token: &str, headers: &HeaderMap) -> bool {
 async fn control(
     State(state): State<AppState>,
     Path(action): Path<String>,
+    RawQuery(query): RawQuery,
     headers: HeaderMap,
 ) -> Response {
     let Some(token) = state.token.as_deref() else {
@@ -489,10 +493,14 @@ async fn control(
         "pause" => ControlCommand::Pause,
         "resume" => ControlCommand::Resume,
         "stop" => ControlCommand::Stop,
+        "pose" => match pose_of_query(query.as_deref().unwrap_or("")) {
+            Ok(pose) => ControlCommand::Pose(pose),
+            Err(why) => return (StatusCode::BAD_REQUEST, format!("{why}\n")).into_response(),
+        },
         _ => {
             return (
                 StatusCode::NOT_FOUND,
-                "control actions: pause, resume, stop\n",
+                "control actions: pause, resume, stop, pose?x=…&y=…&theta=…\n",
             )
                 .into_response();
         }
@@ -505,6 +513,37 @@ async fn control(
             .into_response(),
         Err(_) => too_many(),
     }
+}
+
+/// The pose of `x=…&y=…&theta=…` (m, m, rad; each once, finite).
+fn pose_of_query(query: &str) -> Result<Pose2, String> {
+    let mut v = [None; 3];
+    for pair in query.split('&').filter(|p| !p.is_empty()) {
+        let (key, value) = pair.split_once('=').unwrap_or((pair, ""));
+        let slot = match key {
+            "x" => &mut v[0],
+            "y" => &mut v[1],
+            "theta" => &mut v[2],
+            other => return Err(format!("pose: unknown parameter {:?}", truncate(other))),
+        };
+        let number = value
+            .parse::<f64>()
+            .ok()
+            .filter(|n| n.is_finite())
+            .ok_or_else(|| format!("pose: {key} is not a finite number: {:?}", truncate(value)))?;
+        if slot.replace(number).is_some() {
+            return Err(format!("pose: {key} given twice"));
+        }
+    }
+    match v {
+        [Some(x), Some(y), Some(theta)] => Ok(Pose2::new(x, y, theta)),
+        _ => Err("pose: x, y and theta are needed (m, m, rad in the map frame)".into()),
+    }
+}
+
+/// At most 32 characters of what a client sent, for an error message.
+fn truncate(s: &str) -> String {
+    s.chars().take(32).collect()
 }
 
 /// Server-sent events: `status` with each new view, `map` with each new
@@ -609,5 +648,25 @@ mod tests {
             HeaderValue::from_static("0123456789abcdef"),
         );
         assert!(!authorized(token, &headers));
+    }
+
+    #[test]
+    fn a_pose_is_read_from_its_query_or_refused_with_the_reason() {
+        let p = pose_of_query("x=1.5&y=-2&theta=0.25").unwrap();
+        assert_eq!((p.x, p.y, p.theta), (1.5, -2.0, 0.25));
+        let p = pose_of_query("theta=3&y=2&x=1").unwrap();
+        assert_eq!((p.x, p.y, p.theta), (1.0, 2.0, 3.0));
+        for (query, why) in [
+            ("", "are needed"),
+            ("x=1&y=2", "are needed"),
+            ("x=1&y=2&theta=nan", "theta is not a finite number"),
+            ("x=1&y=2&theta=inf", "theta is not a finite number"),
+            ("x=1&y=2&theta", "theta is not a finite number"),
+            ("x=1&x=2&y=2&theta=0", "x given twice"),
+            ("x=1&y=2&theta=0&z=4", "unknown parameter \"z\""),
+        ] {
+            let error = pose_of_query(query).unwrap_err();
+            assert!(error.contains(why), "{query}: {error}");
+        }
     }
 }

@@ -71,10 +71,24 @@ pub struct GlobalConfig {
     pub odometry_sigma_floor: f64,
     /// A hypothesis survives a later scan when that scan's lines leave at
     /// most this much more length (m) unexplained at its pose than at the
-    /// best hypothesis' pose. Default 0.5: more than fit and extent noise
+    /// best hypothesis' pose, beyond what the previous scan left
+    /// unexplained there more than at the best. Default 0.5: more than fit and extent noise
     /// (a few cm per line), less than a piece of furniture or a door
     /// recess that only one of two symmetric places has.
     pub consistency_margin: f64,
+    /// A hypothesis survives a later scan only when that scan's lines lie
+    /// on map lines at its pose for at least this fraction of their length.
+    /// Default 0.5: the map was built from such scans, so at the right
+    /// place most of a scan is explained (clutter and people aside).
+    pub min_explained: f64,
+    /// A hypothesis is refuted when more than this length (m) of map walls
+    /// stands inside the scan's free space at its pose (the beams went
+    /// through where the map has a wall). Default 0.5 m, as for loop
+    /// closures: a door left open or a moved chair, not a room's wall.
+    pub max_free_space_conflict: f64,
+    /// A wall point counts as inside the free space when farther than this
+    /// (m) from its boundary. Default 0.15: pose and fit noise.
+    pub free_space_tolerance: f64,
     /// A local line at a hypothesis counts as lying on a map line, for the
     /// score, when their directions differ by at most this (rad). Default
     /// 0.05: the pose is refined, so only fit noise remains.
@@ -111,6 +125,9 @@ impl Default for GlobalConfig {
             odometry_sigma_per_rad: 0.05,
             odometry_sigma_floor: 0.02,
             consistency_margin: 0.5,
+            min_explained: 0.5,
+            max_free_space_conflict: 0.5,
+            free_space_tolerance: 0.15,
             score_angle: 0.05,
             score_distance: 0.1,
             localizer: LocalizerConfig {

@@ -7,6 +7,8 @@
 //!    -> Result<GlobalResult { hypotheses, ambiguous }, GlobalError>`.
 //! - `disambiguate(&GlobalResult, lines, odometry motion, &GlobalMap, &GlobalConfig)`
 //!   keeps the hypotheses a further scan agrees with.
+//! - `refute(GlobalResult, &LocalRegion /* the scan's free space */, &GlobalMap, &GlobalConfig)`
+//!   drops the hypotheses at which map walls stand where the scan saw through.
 //!
 //! # Method
 //!
@@ -31,4 +33,4 @@ mod vote;
 pub use config::GlobalConfig;
 pub use map::GlobalMap;
 pub use search::{GlobalError, GlobalResult, Hypothesis, global_localize};
-pub use track::disambiguate;
+pub use track::{disambiguate, refute};

@@ -20,6 +20,8 @@ pub struct Hypothesis {
     /// (after [`disambiguate`](super::disambiguate): summed over the scans
     /// used).
     pub score: f64,
+    /// Of that, the length (m) the newest scan explained.
+    pub last_matched: f64,
     /// Local line length (m) that voted for the unrefined pose.
     pub votes: f64,
     /// Whether local localization refined the voted pose.
@@ -35,8 +37,9 @@ pub struct GlobalResult {
     /// Distinct poses, best score first.
     pub hypotheses: Vec<Hypothesis>,
     /// Whether the best is not clearly the place: a distinct runner-up
-    /// scores within [`GlobalConfig::ambiguity_ratio`] of it, or the best
-    /// leaves a direction unconstrained.
+    /// scores within [`GlobalConfig::ambiguity_ratio`] of it, the best
+    /// leaves a direction unconstrained, or local localization did not
+    /// confirm it.
     pub ambiguous: bool,
 }
 
@@ -179,7 +182,9 @@ pub(crate) fn rank(mut hyps: Vec<Hypothesis>, cfg: &GlobalConfig) -> GlobalResul
     let ambiguous = match kept.as_slice() {
         [] => false,
         [best, rest @ ..] => {
-            best.degenerate.is_some()
+            // Only a pose that local localization confirmed is the place.
+            !best.refined
+                || best.degenerate.is_some()
                 || rest
                     .first()
                     .is_some_and(|r| r.score >= cfg.ambiguity_ratio * best.score)
@@ -202,22 +207,30 @@ pub(crate) fn refine(
     cfg: &GlobalConfig,
 ) -> Hypothesis {
     match localize(lines, map.index(), pose, prior, &cfg.localizer) {
-        Ok(r) => Hypothesis {
-            pose: r.pose,
-            covariance: r.covariance,
-            score: explained_length(lines, map, &r.pose, cfg),
-            votes,
-            refined: true,
-            degenerate: r.degenerate,
-        },
-        Err(_) => Hypothesis {
-            pose,
-            covariance: *prior,
-            score: explained_length(lines, map, &pose, cfg),
-            votes,
-            refined: false,
-            degenerate: None,
-        },
+        Ok(r) => {
+            let score = explained_length(lines, map, &r.pose, cfg);
+            Hypothesis {
+                pose: r.pose,
+                covariance: r.covariance,
+                score,
+                last_matched: score,
+                votes,
+                refined: true,
+                degenerate: r.degenerate,
+            }
+        }
+        Err(_) => {
+            let score = explained_length(lines, map, &pose, cfg);
+            Hypothesis {
+                pose,
+                covariance: *prior,
+                score,
+                last_matched: score,
+                votes,
+                refined: false,
+                degenerate: None,
+            }
+        }
     }
 }
 
@@ -396,6 +409,7 @@ mod tests {
             pose: Pose2::new(x, 0.0, 0.0),
             covariance: diagonal(0.1, 0.05),
             score,
+            last_matched: score,
             votes: score,
             refined: true,
             degenerate: None,

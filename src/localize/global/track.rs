@@ -10,6 +10,7 @@ use super::search::{
 };
 use crate::geometry::{CogLine, Pose2};
 use crate::localize::localize;
+use crate::map::cls::LocalRegion;
 
 /// Covariance of a hypothesis moved by `motion` (robot frame): its own plus
 /// odometry noise growing with the distance and the turn.
@@ -39,34 +40,102 @@ pub fn disambiguate(
     map: &GlobalMap,
     cfg: &GlobalConfig,
 ) -> Result<GlobalResult, GlobalError> {
-    let mut moved: Vec<(Hypothesis, f64)> = Vec::new();
+    // Each place's shortfall against the best on the previous scan: a
+    // place that explained a view less before explains the same view less
+    // again, and that is no new evidence against it.
+    let best_before = previous
+        .hypotheses
+        .iter()
+        .map(|h| h.last_matched)
+        .fold(0.0, f64::max);
+    let mut moved: Vec<(Hypothesis, f64, f64)> = Vec::new();
     for h in &previous.hypotheses {
         let predicted = h.pose.compose(&motion);
-        let prior = predicted_covariance(h, &motion, cfg);
-        let Ok(r) = localize(lines, map.index(), predicted, &prior, &cfg.localizer) else {
-            continue;
-        };
-        let matched = explained_length(lines, map, &r.pose, cfg);
+        let mut prior = predicted_covariance(h, &motion, cfg);
+        let mut localizer = cfg.localizer;
+        if let Some(v) = h.degenerate {
+            // Where along a corridor the robot is was a guess: the scan
+            // that first shows a cross wall may move it far along it.
+            let along = cfg.localizer.max_translation_jump;
+            for (r, vr) in v.iter().enumerate() {
+                for (c, vc) in v.iter().enumerate() {
+                    prior[r][c] += along * along * vr * vc;
+                }
+            }
+            localizer.max_translation_jump = 3.0 * along;
+        }
+        // A local localization that fails (a wall up close, too few lines)
+        // is no evidence against the place: the hypothesis stays where the
+        // odometry puts it and is judged by what the scan shows there.
+        let (pose, covariance, refined, degenerate) =
+            match localize(lines, map.index(), predicted, &prior, &localizer) {
+                Ok(r) => (r.pose, r.covariance, true, r.degenerate),
+                Err(_) => (predicted, prior, false, None),
+            };
+        let matched = explained_length(lines, map, &pose, cfg);
         moved.push((
             Hypothesis {
-                pose: r.pose,
-                covariance: r.covariance,
+                pose,
+                covariance,
                 score: h.score + matched,
+                last_matched: matched,
                 votes: h.votes,
-                refined: true,
-                degenerate: r.degenerate,
+                refined,
+                degenerate,
             },
             matched,
+            best_before - h.last_matched,
         ));
     }
+    // The new scan drops a place when it explains more than the margin
+    // less there than at the best place, beyond the shortfall the place
+    // had on the previous scan (a second look at the same view drops
+    // nothing), or when it leaves most of the scan unexplained there: when
+    // no place explains the scan, the search starts over from this scan.
     let best = moved.iter().map(|m| m.1).fold(0.0, f64::max);
+    let shown: f64 = lines.iter().map(CogLine::length).sum();
     let survivors: Vec<Hypothesis> = moved
         .into_iter()
-        .filter(|(_, m)| best > 0.0 && *m >= best - cfg.consistency_margin)
-        .map(|(h, _)| h)
+        .filter(|(_, m, before)| {
+            best > 0.0
+                && *m >= cfg.min_explained * shown
+                && best - m <= cfg.consistency_margin + before.max(0.0)
+        })
+        .map(|(h, _, _)| h)
         .collect();
     if survivors.is_empty() {
         return global_localize(lines, map, cfg);
     }
     Ok(rank(survivors, cfg))
+}
+
+/// Drops the hypotheses at whose pose more than
+/// [`GlobalConfig::max_free_space_conflict`] of the map's walls stands
+/// inside `free`, the scan's free space (robot frame): the beams went
+/// through where the map has a wall, so the robot is not there. Matched
+/// line length only counts what agrees; this counts what contradicts,
+/// which tells apart places that agree on every wall one of them shows.
+pub fn refute(
+    result: GlobalResult,
+    free: &LocalRegion,
+    map: &GlobalMap,
+    cfg: &GlobalConfig,
+) -> GlobalResult {
+    let (centre, radius) = free.bounding_circle();
+    let kept: Vec<Hypothesis> = result
+        .hypotheses
+        .into_iter()
+        .filter(|h| {
+            // Along a corridor the pose is a guess: its jambs and cross
+            // walls may stand in the free space of the true place a metre
+            // on, so a degenerate hypothesis is not judged by them.
+            if h.degenerate.is_some() {
+                return true;
+            }
+            let region = free.transformed(&h.pose);
+            let walls = map.index().near(h.pose.transform_point(centre), radius);
+            region.length_inside(walls, cfg.free_space_tolerance) <= cfg.max_free_space_conflict
+        })
+        .collect();
+    rank(kept, cfg)
 }

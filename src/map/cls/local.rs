@@ -119,6 +119,52 @@ impl LocalRegion {
         }
     }
 
+    /// Length (m) of `lines` (this region's frame) lying inside it farther
+    /// than `tolerance` (m) from the boundary, sampled every 5 cm: walls
+    /// standing where the scan saw through.
+    pub fn length_inside<'a>(
+        &self,
+        lines: impl IntoIterator<Item = &'a CogLine>,
+        tolerance: f64,
+    ) -> f64 {
+        let mut inside = 0.0;
+        for l in lines {
+            let len = l.length();
+            let n = ((len / 0.05).ceil() as usize).max(1);
+            let step = len / n as f64;
+            for k in 0..n {
+                let f = (k as f64 + 0.5) / n as f64;
+                let p = [
+                    l.start[0] + f * (l.end[0] - l.start[0]),
+                    l.start[1] + f * (l.end[1] - l.start[1]),
+                ];
+                if self.strictly_contains(p, tolerance) {
+                    inside += step;
+                }
+            }
+        }
+        inside
+    }
+
+    /// Centre and radius (m) of a circle that holds the region.
+    pub fn bounding_circle(&self) -> ([f64; 2], f64) {
+        let points = || self.edges.iter().flat_map(|e| [e.start, e.end]);
+        let (lo, hi) = points().fold(
+            ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
+            |(lo, hi), p| {
+                (
+                    [lo[0].min(p[0]), lo[1].min(p[1])],
+                    [hi[0].max(p[0]), hi[1].max(p[1])],
+                )
+            },
+        );
+        if !(lo[0] <= hi[0] && lo[1] <= hi[1]) {
+            return ([0.0, 0.0], 0.0);
+        }
+        let centre = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
+        (centre, 0.5 * (hi[0] - lo[0]).hypot(hi[1] - lo[1]))
+    }
+
     /// Whether `p` lies strictly inside, farther than `tolerance` (m) from
     /// the boundary.
     pub fn strictly_contains(&self, p: [f64; 2], tolerance: f64) -> bool {
