@@ -131,6 +131,12 @@ fn restart(config: &DaemonConfig, map: &Path, origin: Pose2, start: Pose2) -> Re
     let after = robot.now();
     let settle = after + 1.0;
     robot.run_until(settle, |_| false);
+    // Found, the turn is over: with no explorer the base stands.
+    assert_eq!(
+        robot.robot().applied_twist(),
+        clsmap_base::Twist::ZERO,
+        "still turning a second after found"
+    );
     let now = robot.now();
     let truth = origin.between(&robot.robot().true_pose_at(now));
     let estimate = robot.live().pose_now().unwrap();
@@ -176,7 +182,6 @@ fn a_restart_anywhere_in_a_mapped_world_finds_the_robot() {
         let _ = std::fs::remove_dir_all(&dir);
         let (config, map_file, origin) = map_world(world, &dir);
         let map = ClsMap::load(&map_file, ClsMapConfig::default()).unwrap();
-        let bytes = std::fs::read(&map_file).unwrap();
         let walls = clsmap::sim::WorldFile::builtin(world).unwrap().world;
         let starts = free_poses(&map, walls.walls(), origin, runs, 7);
         let results: Vec<Restart> = starts
@@ -257,11 +262,6 @@ fn a_restart_anywhere_in_a_mapped_world_finds_the_robot() {
             "{world}: {good_elsewhere}/{}: {results:?} from {starts:?}",
             elsewhere.len()
         );
-        assert_eq!(
-            std::fs::read(&map_file).unwrap(),
-            bytes,
-            "the loaded map was written"
-        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
@@ -332,6 +332,7 @@ fn a_kidnapped_robot_is_found_again_and_the_map_learns_nothing_meanwhile() {
         "not found again within the turn"
     );
     robot.run_until(robot.now() + 1.0, |_| false);
+    assert_eq!(robot.robot().applied_twist(), clsmap_base::Twist::ZERO);
     let truth = origin.between(&robot.robot().true_pose_at(robot.now()));
     let estimate = robot.live().pose_now().unwrap();
     let error = (estimate.x - truth.x).hypot(estimate.y - truth.y);

@@ -38,8 +38,9 @@ pub struct CheckpointFailed {
 
 impl Checkpoint {
     /// Appends the poses to [`TRAJECTORY_FILE`] (and syncs it), then
-    /// rewrites the maps and the picture, each atomically: a crash
-    /// mid-write leaves the previous checkpoint whole.
+    /// rewrites the maps and the picture, each atomically, when the
+    /// checkpoint holds them: a crash mid-write leaves the previous
+    /// checkpoint whole.
     pub fn write(self) -> Result<(), CheckpointFailed> {
         let fail = |error: PipelineError, trajectory: Vec<StampedPose>| CheckpointFailed {
             error,

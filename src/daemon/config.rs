@@ -92,9 +92,11 @@ pub struct MapSection {
     /// this rate (rad/s), so the scans see more of the place and tell
     /// look-alike places apart; 0 = it stands still. Default 0.3.
     pub turn_rate: f64,
-    /// Longest time (s) the base turns for one search; then it stops and
-    /// waits (status LOST) until a scan or a pose hint settles it.
-    /// Default 30 (a turn and a half at the default rate).
+    /// Longest time (s) one search runs with scans coming in (not paused)
+    /// while the base turns for it; then it stops and waits (status LOST)
+    /// until a scan or a pose hint settles it. With `turn_rate = 0` the
+    /// base stands still and the status turns LOST after this long; with 0
+    /// here it never turns. Default 30 (a turn and a half at 0.3 rad/s).
     pub turn_for: f64,
 }
 
@@ -316,8 +318,9 @@ pub struct LoopConfig {
     pub status_interval: f64,
     /// Stop after this many seconds, saving the map (default 0 = never).
     pub max_run_time: f64,
-    /// systemd hears READY=1 at the first scan, or after this many seconds
-    /// without one (default 10 s). The start counts as complete only at
+    /// systemd hears READY=1 at the first scan (in a loaded map, once the
+    /// robot is found in it), or after this many seconds without (default
+    /// 10 s). The start counts as complete only at
     /// READY, and boot waits for it (multi-user.target is ordered after
     /// the units it wants): a sensor switched off must not hold up the
     /// robot's boot. The daemon then goes on waiting for the sensor and
@@ -449,7 +452,8 @@ impl DaemonConfig {
                 "\"localize\" or \"extend\"",
             ));
         }
-        within("map.turn_rate", self.map.turn_rate, 0.0, b.max_turn_rate)?;
+        // Faster than the base allows is cut to its limit, like any command.
+        within("map.turn_rate", self.map.turn_rate, 0.0, 10.0)?;
         within("map.turn_for", self.map.turn_for, 0.0, 3600.0)?;
         if !matches!(self.map.on_bad_map.as_str(), "refuse" | "new") {
             return Err(range(

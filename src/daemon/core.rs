@@ -125,10 +125,16 @@ pub struct Core {
     last_view_t: f64,
     /// Optimisations taken in so far (each moves the whole map).
     optimisations: u64,
-    /// When the current search for the robot in a loaded map began (s).
-    search_began: Option<f64>,
-    /// The search ran out of turning time: the robot waits, stopped.
+    /// Seconds the current search for the robot in a loaded map has run
+    /// with scans coming in, and whether that is past `turn_for` (the robot
+    /// then waits, stopped); whether the base turned for it at the last
+    /// control step, and when that step was.
+    search_time: f64,
     search_waiting: bool,
+    was_turning: bool,
+    last_control_at: Option<f64>,
+    /// The last pose hint taken: the same hint sent again is not a new one.
+    last_hint: Option<Pose2>,
 }
 
 /// What makes the map look different: counts that change with it.
@@ -189,8 +195,11 @@ impl Core {
             scans_at_last_view: 0,
             last_view_t: 0.0,
             optimisations: 0,
-            search_began: None,
+            search_time: 0.0,
             search_waiting: false,
+            was_turning: false,
+            last_control_at: None,
+            last_hint: None,
         }
     }
 
@@ -318,6 +327,12 @@ impl Core {
     /// A pose hint (map frame) from `from` at `now`: the search for the
     /// robot in the loaded map starts again from it.
     pub fn handle_pose_hint(&mut self, now: f64, pose: Pose2, from: &str) {
+        // A bridge that repeats its hint must not restart the search on
+        // every line: the same pose again is the same hint.
+        if self.last_hint == Some(pose) {
+            return;
+        }
+        self.last_hint = Some(pose);
         match self.live.hint_pose(now, pose) {
             Ok(()) => {
                 info!(
@@ -327,7 +342,7 @@ impl Core {
                     "pose hint from {from}: looking for the robot there"
                 );
                 // A new search: the base may turn for it again.
-                self.search_began = None;
+                self.search_time = 0.0;
                 self.search_waiting = false;
             }
             Err(e) => warn!("pose hint from {from} refused: {e}"),
@@ -436,8 +451,8 @@ impl Core {
         // A robot not (or no longer) found in a loaded map does not drive
         // but turns in place for a while, so its scans see more of the
         // place; one paused from the live view is held.
-        let turning = self.turning(now);
-        let placed = self.search_began.is_none();
+        let searching = self.follow_search(now, sensor_ok);
+        let turning = searching && !self.search_waiting && self.config.map.turn_rate > 0.0;
         let manual = if self.paused {
             self.live.hold_exploration(now);
             Some(Twist::ZERO)
@@ -451,9 +466,15 @@ impl Core {
         } else {
             manual
         };
+        // The turn ends (found, or out of time): stopped, not left turning
+        // when no explorer takes over.
+        if self.was_turning && !turning {
+            self.base.halt(now);
+        }
+        self.was_turning = turning;
         self.base.control(
             &mut self.live,
-            sensor_ok && (placed || turning),
+            sensor_ok && (!searching || turning),
             now,
             manual,
         );
@@ -468,17 +489,21 @@ impl Core {
         }
     }
 
-    /// Follows the search for the robot in a loaded map; whether the base
-    /// is to turn in place at `now` (s) for it.
-    fn turning(&mut self, now: f64) -> bool {
+    /// Follows the search for the robot in a loaded map at `now` (s):
+    /// whether one is on. Its time counts while scans come in and the robot
+    /// is not paused; after `turn_for` of it the robot waits, stopped.
+    fn follow_search(&mut self, now: f64, sensor_ok: bool) -> bool {
+        let last = self.last_control_at.replace(now);
         if self.live.mapper().map_search().is_none() {
-            self.search_began = None;
+            self.search_time = 0.0;
             self.search_waiting = false;
             return false;
         }
-        let began = *self.search_began.get_or_insert(now);
-        self.search_waiting = now - began >= self.config.map.turn_for;
-        self.config.map.turn_rate > 0.0 && !self.search_waiting
+        if sensor_ok && !self.paused {
+            self.search_time += last.map_or(0.0, |t| (now - t).max(0.0));
+        }
+        self.search_waiting = self.search_time >= self.config.map.turn_for;
+        true
     }
 
     /// The mapper's status; a search for the robot that has run longer

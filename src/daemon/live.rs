@@ -319,10 +319,13 @@ impl LiveMapper {
         let mut result = explorer.control(self.mapper.cls_map(), pose, now);
         if matches!(result.1, Some(ExplorerEvent::Complete { .. })) && !self.mapper.is_settled() {
             // Completion is judged on the map as it will be saved: the
-            // loops not optimised in yet may open a frontier.
+            // loops not optimised in yet may open a frontier. (A job in
+            // flight is done again here, on the loop: the robot stands.)
             info!("exploration: frontiers closed; the map takes in its last loops first");
-            explorer.reconsider(now);
             self.settle();
+            if let Some(explorer) = self.explorer.as_mut() {
+                explorer.reconsider(now);
+            }
             result = (Twist::ZERO, None);
         }
         self.latencies.record(Stage::Control, started.elapsed());

@@ -240,16 +240,7 @@ impl KeyframeGraph {
         }
         self.jobs += 1;
         let id = self.jobs;
-        let loops = self.graph.loop_edges().count();
-        let new_loops: Vec<usize> = self
-            .graph
-            .edges()
-            .iter()
-            .enumerate()
-            .filter(|(_, e)| e.kind == EdgeKind::Loop)
-            .map(|(i, _)| i)
-            .skip(loops.saturating_sub(self.unoptimised_loops))
-            .collect();
+        let new_loops = self.unoptimised_loop_edges();
         self.wants_optimisation = false;
         self.unoptimised_loops = 0;
         self.in_flight = Some((id, self.keyframes.len()));
@@ -546,23 +537,45 @@ impl KeyframeGraph {
         Some(near)
     }
 
+    /// Indices of the loop edges not optimised in yet (the newest ones).
+    fn unoptimised_loop_edges(&self) -> Vec<usize> {
+        let loops = self.graph.loop_edges().count();
+        self.graph
+            .edges()
+            .iter()
+            .enumerate()
+            .filter(|(_, e)| e.kind == EdgeKind::Loop)
+            .map(|(i, _)| i)
+            .skip(loops.saturating_sub(self.unoptimised_loops))
+            .collect()
+    }
+
     /// Whether every loop edge is optimised in and no job is in flight:
     /// [`settle`](Self::settle) would change nothing.
     pub fn is_settled(&self) -> bool {
         self.unoptimised_loops == 0 && !self.wants_optimisation && self.in_flight.is_none()
     }
 
-    /// Optimises once more if loop edges came in since the last
-    /// optimisation (the end of a run); the correction of the newest
-    /// keyframe when the poses moved.
-    /// A job in flight is superseded: its result will be ignored.
+    /// Optimises now if loop edges came in since the last optimisation (the
+    /// end of a run, or exploration judged complete); the correction of the
+    /// newest keyframe when the poses moved. A job in flight is superseded:
+    /// its result will be ignored. A failed optimisation drops the loops it
+    /// was for.
     pub fn settle(&mut self, cfg: &LoopClosureConfig) -> Result<Option<Correction>, GraphError> {
         if self.is_settled() {
             return Ok(None);
         }
         self.in_flight = None;
         self.wants_optimisation = false;
-        self.optimise(cfg).map(Some)
+        let result = self.optimise(cfg).map(Some);
+        if result.is_err() {
+            // As for a failed job: the loops it was for are dropped, so the
+            // graph is settled and later optimisations do not fail on them.
+            let new_loops = self.unoptimised_loop_edges();
+            self.graph.remove_edges(&new_loops);
+            self.unoptimised_loops = 0;
+        }
+        result
     }
 
     fn optimise(&mut self, cfg: &LoopClosureConfig) -> Result<Correction, GraphError> {

@@ -182,14 +182,14 @@ impl Mapper {
         &self.map
     }
 
-    /// The Closed Line Segment map grown so far (with its rebuild deferred,
-    /// see [`defer_cls_rebuild`](Self::defer_cls_rebuild), empty or out of
-    /// date until [`finish`](Self::finish)).
     /// The last scan's pose covariance (x, y, θ; m², m·rad, rad²).
     pub fn last_covariance(&self) -> [[f64; 3]; 3] {
         self.last_covariance
     }
 
+    /// The Closed Line Segment map grown so far (with its rebuild deferred,
+    /// see [`defer_cls_rebuild`](Self::defer_cls_rebuild), empty or out of
+    /// date until [`settle`](Self::settle)).
     pub fn cls_map(&self) -> &ClsMap {
         &self.cls
     }

@@ -58,9 +58,10 @@ pub struct StartSearch {
     config: GlobalConfig,
     /// The hypotheses so far and the odometry at their scan.
     last: Option<(GlobalResult, Option<Pose2>)>,
-    /// Started from a hint given without odometry: the robot is taken to
-    /// stand where it was told until a scan settles it.
-    hinted_still: bool,
+    /// Started from a pose hint, and whether the next scan is the first
+    /// since it.
+    hinted: bool,
+    first_after_hint: bool,
 }
 
 impl StartSearch {
@@ -72,7 +73,8 @@ impl StartSearch {
                 ..config
             },
             last: None,
-            hinted_still: false,
+            hinted: false,
+            first_after_hint: false,
         }
     }
 
@@ -105,7 +107,8 @@ impl StartSearch {
                 ..config
             },
             last: Some((result, odometry)),
-            hinted_still: odometry.is_none(),
+            hinted: true,
+            first_after_hint: true,
         }
     }
 
@@ -119,52 +122,37 @@ impl StartSearch {
         free: Option<&LocalRegion>,
         odometry: Option<Pose2>,
     ) -> Option<(Pose2, [[f64; 3]; 3])> {
+        // The motion since the hypotheses' scan, from the odometry; a hint
+        // given or followed without odometry takes the robot to stand still
+        // (the hint's σ covers a slow drift meanwhile).
+        let first_after_hint = std::mem::take(&mut self.first_after_hint);
         let motion = match (&self.last, odometry) {
             (Some((previous, Some(before))), Some(now)) => Some((previous, before.between(&now))),
-            (Some((previous, None)), None) if self.hinted_still => {
-                Some((previous, Pose2::IDENTITY))
-            }
+            (Some((previous, _)), _) if first_after_hint => Some((previous, Pose2::IDENTITY)),
             _ => None,
         };
-        self.hinted_still = false;
+        let tracked = motion.is_some();
         let result = match motion {
             Some((previous, motion)) => {
                 disambiguate(previous, lines, motion, &self.map, &self.config)
             }
             None => global_localize(lines, &self.map, &self.config),
         };
-        let result = match (result, free) {
-            (Ok(r), Some(free)) => Ok(refute(r, free, &self.map, &self.config)),
-            (result, _) => result,
-        };
-        // A full set whose last place scores like the best may have left
-        // out more alike places, the right one among them: it is not
-        // narrowed down (its survivors could all be wrong), and the next
-        // scan searches afresh.
-        let result = result.map(|r| {
-            let full = r.hypotheses.len() >= self.config.max_hypotheses;
-            let alike = match (r.hypotheses.first(), r.hypotheses.last()) {
-                (Some(best), Some(last)) => last.score >= self.config.ambiguity_ratio * best.score,
-                _ => false,
-            };
-            if full && alike {
-                GlobalResult {
-                    hypotheses: Vec::new(),
-                    ambiguous: true,
-                }
-            } else {
-                r
-            }
-        });
-        let tracked = motion.is_some();
-        match result {
-            Ok(r) if !r.ambiguous => {
+        match result.map(|r| self.screen(r, free)) {
+            Ok(r) if !r.ambiguous && !r.hypotheses.is_empty() => {
                 let best = r.best()?;
                 // Narrowed down to one place: the scan that did it, searched
                 // afresh, must find that place too. Otherwise the tracked
                 // places never held the right one (it showed only now), and
-                // the search goes on from this scan's.
-                if tracked && let Some(fresh) = self.fresh(lines, free) {
+                // the search goes on from this scan's. (A hint is trusted:
+                // it may be where a fresh search of a look-alike floor does
+                // not look.)
+                if tracked
+                    && !self.hinted
+                    && let Some(fresh) = global_localize(lines, &self.map, &self.config)
+                        .ok()
+                        .map(|f| self.screen(f, free))
+                {
                     let agrees = fresh.hypotheses.iter().any(|h| {
                         (h.pose.x - best.pose.x).hypot(h.pose.y - best.pose.y)
                             <= 2.0 * self.config.cluster_distance
@@ -172,7 +160,7 @@ impl StartSearch {
                                 <= 2.0 * self.config.cluster_angle
                     });
                     if !agrees {
-                        self.last = Some((fresh, odometry));
+                        self.last = (!fresh.hypotheses.is_empty()).then_some((fresh, odometry));
                         return None;
                     }
                 }
@@ -182,8 +170,9 @@ impl StartSearch {
                 self.last = Some((r, odometry));
                 None
             }
-            // Nothing to go on (too few lines, or every hypothesis lost):
-            // start over with the next scan.
+            // Nothing to go on (too few lines, every place refuted or lost,
+            // or a set too full to narrow down): start over with the next
+            // scan.
             _ => {
                 self.last = None;
                 None
@@ -191,14 +180,28 @@ impl StartSearch {
         }
     }
 
-    /// This scan's places from a fresh global localization, refuted by its
-    /// free space; `None` when the search gives nothing.
-    fn fresh(&self, lines: &[CogLine], free: Option<&LocalRegion>) -> Option<GlobalResult> {
-        let r = global_localize(lines, &self.map, &self.config).ok()?;
-        Some(match free {
+    /// The places of `r` that the scan's free space `free` does not refute;
+    /// none when the set is full and its last place scores like the best:
+    /// more alike places may have been left out, the right one among them,
+    /// so narrowing it down could end sure of a wrong one.
+    fn screen(&self, r: GlobalResult, free: Option<&LocalRegion>) -> GlobalResult {
+        let r = match free {
             Some(free) => refute(r, free, &self.map, &self.config),
             None => r,
-        })
+        };
+        let full = r.hypotheses.len() >= self.config.max_hypotheses;
+        let alike = match (r.hypotheses.first(), r.hypotheses.last()) {
+            (Some(best), Some(last)) => last.score >= self.config.ambiguity_ratio * best.score,
+            _ => false,
+        };
+        if full && alike {
+            GlobalResult {
+                hypotheses: Vec::new(),
+                ambiguous: true,
+            }
+        } else {
+            r
+        }
     }
 
     /// Hypotheses held now.

@@ -194,20 +194,26 @@ fn run_with_a_saved_map_localizes_and_leaves_the_map_untouched_on_sigterm() {
     let config = demo_run_config(&dir, "");
     let mut daemon = Daemon::start_with(&config, &["--map", arg(&saved), "--mode", "localize"]);
     daemon.wait_for("first scan localized", Duration::from_secs(60));
-    // Checkpoints (every second here) write the path, not the map.
+    // Checkpoints (every second here) write the path, not the map: two of
+    // them done (the path grew after the first) and still no map.
     let deadline = Instant::now() + Duration::from_secs(30);
+    let mut first: Option<u64> = None;
     let run = loop {
-        let state = dir.join("state");
-        let written = std::fs::read_dir(&state)
+        let written = std::fs::read_dir(dir.join("state"))
             .ok()
             .and_then(|mut d| d.next())
             .and_then(Result::ok)
             .map(|e| e.path())
-            .filter(|run| run.join("trajectory.tum").is_file());
-        if let Some(run) = written {
-            break run;
+            .and_then(|run| {
+                let len = std::fs::metadata(run.join("trajectory.tum")).ok()?.len();
+                Some((run, len))
+            });
+        match (first, written) {
+            (Some(before), Some((run, len))) if len > before => break run,
+            (None, Some((_, len))) => first = Some(len),
+            _ => {}
         }
-        assert!(Instant::now() < deadline, "no checkpoint within 30 s");
+        assert!(Instant::now() < deadline, "no two checkpoints within 30 s");
         std::thread::sleep(Duration::from_millis(50));
     };
     assert!(

@@ -21,8 +21,9 @@
 //! costs O(voters · log n), not O(voters · n). The best-voted poses are
 //! refined by local localization and re-scored by the local length they
 //! match; near-identical poses are merged, and a result whose runner-up
-//! scores nearly as well as the best (a symmetric place) is flagged as
-//! ambiguous instead of being collapsed.
+//! scores nearly as well as the best (a symmetric place), whose best leaves
+//! a direction unconstrained, or whose best local localization did not
+//! confirm, is flagged as ambiguous instead of being collapsed.
 
 mod config;
 mod map;

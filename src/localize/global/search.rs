@@ -115,7 +115,7 @@ pub(crate) fn explained_length(
     total
 }
 
-fn check_config(cfg: &GlobalConfig) -> Result<(), GlobalError> {
+pub(crate) fn check_config(cfg: &GlobalConfig) -> Result<(), GlobalError> {
     let positive = [
         (cfg.blur, "blur"),
         (cfg.score_angle, "score_angle"),
@@ -141,6 +141,9 @@ fn check_config(cfg: &GlobalConfig) -> Result<(), GlobalError> {
         (cfg.odometry_sigma_per_m, "odometry_sigma_per_m"),
         (cfg.odometry_sigma_per_rad, "odometry_sigma_per_rad"),
         (cfg.consistency_margin, "consistency_margin"),
+        (cfg.min_explained, "min_explained"),
+        (cfg.max_free_space_conflict, "max_free_space_conflict"),
+        (cfg.free_space_tolerance, "free_space_tolerance"),
     ];
     for (v, what) in non_negative {
         if !(v.is_finite() && v >= 0.0) {

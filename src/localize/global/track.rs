@@ -1,12 +1,15 @@
 //! Disambiguation by further scans: every hypothesis is moved by the
 //! odometry between the scans (for example a rotation in place) and
-//! localized locally with the new scan; only the hypotheses at which the new scan
-//! leaves little more unexplained than at the best one survive.
+//! localized locally with the new scan (kept where the odometry puts it
+//! when that fails); a hypothesis is dropped when the new scan leaves more
+//! unexplained there than at the best one, beyond what the previous scan
+//! did, or most of the scan unexplained. [`refute`] drops those at which
+//! map walls stand in the scan's free space.
 
 use super::config::GlobalConfig;
 use super::map::GlobalMap;
 use super::search::{
-    GlobalError, GlobalResult, Hypothesis, explained_length, global_localize, rank,
+    GlobalError, GlobalResult, Hypothesis, check_config, explained_length, global_localize, rank,
 };
 use crate::geometry::{CogLine, Pose2};
 use crate::localize::localize;
@@ -48,6 +51,7 @@ pub fn disambiguate(
         .iter()
         .map(|h| h.last_matched)
         .fold(0.0, f64::max);
+    check_config(cfg)?;
     let mut moved: Vec<(Hypothesis, f64, f64)> = Vec::new();
     for h in &previous.hypotheses {
         let predicted = h.pose.compose(&motion);
