@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::explore::{DriveConfig, ExplorationConfig};
 use crate::geometry::Pose2;
-use crate::pipeline::config::{MapperConfig, line_of_key};
+use crate::pipeline::config::{MapperConfig, Rule, line_of_key};
 
 /// Everything the daemon needs.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -396,11 +396,13 @@ impl DaemonConfig {
             value,
             rule: rule.to_string(),
         };
+        // The mapper's rules, so both files say the same of a number.
         let within = |key: &str, v: f64, lo: f64, hi: f64| {
-            if v.is_finite() && (lo..=hi).contains(&v) {
+            let rule = Rule::Within(lo, hi);
+            if rule.holds(v) {
                 Ok(())
             } else {
-                Err(range(key, v.to_string(), &format!("in [{lo}, {hi}]")))
+                Err(range(key, v.to_string(), &rule.text()))
             }
         };
         let s = &self.sensor;
@@ -529,13 +531,13 @@ impl DaemonConfig {
                 "in (-0.5, 0.5)",
             ));
         }
-        if !m.odometry_heading_drift.is_finite() {
-            return Err(range(
-                "sim.odometry_heading_drift",
-                m.odometry_heading_drift.to_string(),
-                "finite",
-            ));
-        }
+        // rad per metre: a tenth of a turn per metre is no base.
+        within(
+            "sim.odometry_heading_drift",
+            m.odometry_heading_drift,
+            -0.6,
+            0.6,
+        )?;
         if let Some(p) = m.start
             && ![p.x, p.y, p.theta].iter().all(|v| v.is_finite())
         {

@@ -452,13 +452,22 @@ impl MapperConfig {
     }
 }
 
-/// What a configuration value must be.
+/// Largest magnitude any configuration number may have unless its rule
+/// says otherwise: a million metres, radians, seconds or sigmas is a typo
+/// (and `1e300` overflows the arithmetic it feeds).
+pub const MAX_CONFIG_VALUE: f64 = 1e6;
+
+/// What a configuration value must be: the one set of rules for the
+/// mapper's and the daemon's configuration files.
 #[derive(Debug, Clone, Copy)]
-enum Rule {
+pub enum Rule {
+    /// Finite, within ±[`MAX_CONFIG_VALUE`].
     Finite,
+    /// In (0, [`MAX_CONFIG_VALUE`]].
     Positive,
+    /// In [0, [`MAX_CONFIG_VALUE`]].
     NonNegative,
-    /// Finite and at least this.
+    /// In [min, [`MAX_CONFIG_VALUE`]].
     AtLeast(f64),
     /// A correspondence angle gate: in (0, π/2), so opposite faces of a
     /// wall never match.
@@ -470,26 +479,29 @@ enum Rule {
 }
 
 impl Rule {
-    fn holds(self, v: f64) -> bool {
+    /// Whether `v` keeps the rule.
+    pub fn holds(self, v: f64) -> bool {
         use std::f64::consts::{FRAC_PI_2, PI};
+        let bounded = v.abs() <= MAX_CONFIG_VALUE;
         v.is_finite()
             && match self {
-                Rule::Finite => true,
-                Rule::Positive => v > 0.0,
-                Rule::NonNegative => v >= 0.0,
-                Rule::AtLeast(min) => v >= min,
+                Rule::Finite => bounded,
+                Rule::Positive => v > 0.0 && bounded,
+                Rule::NonNegative => v >= 0.0 && bounded,
+                Rule::AtLeast(min) => v >= min && bounded,
                 Rule::Gate => v > 0.0 && v < FRAC_PI_2,
                 Rule::Wedge => v > 0.0 && v <= PI,
                 Rule::Within(lo, hi) => (lo..=hi).contains(&v),
             }
     }
 
-    fn text(self) -> String {
+    /// The rule in words, for an error message.
+    pub fn text(self) -> String {
         match self {
-            Rule::Finite => "finite".into(),
-            Rule::Positive => "> 0".into(),
-            Rule::NonNegative => ">= 0".into(),
-            Rule::AtLeast(min) => format!(">= {min}"),
+            Rule::Finite => format!("finite, within ±{MAX_CONFIG_VALUE:e}"),
+            Rule::Positive => format!("in (0, {MAX_CONFIG_VALUE:e}]"),
+            Rule::NonNegative => format!("in [0, {MAX_CONFIG_VALUE:e}]"),
+            Rule::AtLeast(min) => format!("in [{min}, {MAX_CONFIG_VALUE:e}]"),
             Rule::Gate => "in (0, π/2)".into(),
             Rule::Wedge => "in (0, π]".into(),
             Rule::Within(lo, hi) => format!("in [{lo}, {hi}]"),
@@ -693,6 +705,13 @@ mod documented_defaults {
                 "[localizer]\nmax_iterations = 4000000000\n",
                 "[localizer] max_iterations",
             ),
+            // Every number has a bound, not just a sign.
+            ("[map]\nmerge_gap = 1e300\n", "[map] merge_gap"),
+            (
+                "[loop_closure]\nmin_travel = 1e7\n",
+                "[loop_closure] min_travel",
+            ),
+            ("odometry_time_offset = -1e9\n", "odometry_time_offset"),
         ] {
             let err = MapperConfig::from_toml(text).unwrap_err().to_string();
             assert!(err.starts_with(key), "{text:?}: {err}");
