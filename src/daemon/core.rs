@@ -18,7 +18,7 @@
 use std::time::Duration;
 
 use clsmap_base::Twist;
-use tracing::{info, info_span, warn};
+use tracing::{debug, info, info_span, warn};
 
 use super::base_driver::BaseDriver;
 use super::checkpoint::{Checkpoint, CheckpointFailed};
@@ -90,6 +90,10 @@ struct Timers {
 /// copies the map, which grows with the building.
 const MAP_VIEW_EVERY: f64 = 1.0;
 
+/// Seconds within which the same pose hint again is a repeat of it (a
+/// bridge resending its line), not a new hint.
+const REPEATED_HINT: f64 = 5.0;
+
 /// The daemon's loop, sans-IO; see the module doc.
 #[derive(Debug)]
 pub struct Core {
@@ -133,8 +137,9 @@ pub struct Core {
     search_waiting: bool,
     was_turning: bool,
     last_control_at: Option<f64>,
-    /// The last pose hint taken: the same hint sent again is not a new one.
-    last_hint: Option<Pose2>,
+    /// The last pose hint and when it came (s): the same hint again within
+    /// [`REPEATED_HINT`] is a bridge repeating itself, not a new one.
+    last_hint: Option<(Pose2, f64)>,
 }
 
 /// What makes the map look different: counts that change with it.
@@ -328,11 +333,16 @@ impl Core {
     /// robot in the loaded map starts again from it.
     pub fn handle_pose_hint(&mut self, now: f64, pose: Pose2, from: &str) {
         // A bridge that repeats its hint must not restart the search on
-        // every line: the same pose again is the same hint.
-        if self.last_hint == Some(pose) {
+        // every line: the same pose again, soon after, is the same hint.
+        if let Some((last, at)) = self.last_hint.as_mut()
+            && *last == pose
+            && now - *at <= REPEATED_HINT
+        {
+            *at = now;
+            debug!("pose hint from {from} repeated; already taken");
             return;
         }
-        self.last_hint = Some(pose);
+        self.last_hint = Some((pose, now));
         match self.live.hint_pose(now, pose) {
             Ok(()) => {
                 info!(

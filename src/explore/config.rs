@@ -59,7 +59,10 @@ impl ExplorationConfig {
             self.match_distance,
             self.match_angle,
         ];
-        lengths.iter().all(|v| v.is_finite() && *v >= 0.0)
+        // At most 1e6, as every configuration number: more is a typo.
+        lengths
+            .iter()
+            .all(|v| v.is_finite() && (0.0..=1e6).contains(v))
             && self.robot_radius > 0.0
             && self.goal_standoff > 0.0
     }

@@ -82,8 +82,14 @@ impl DriveConfig {
             self.settle_time,
             self.timeout_slack,
         ];
-        positive.iter().all(|v| v.is_finite() && *v > 0.0)
-            && non_negative.iter().all(|v| v.is_finite() && *v >= 0.0)
+        // At most 1e6, as every configuration number: more is a typo (and
+        // overflows the goal's timeout).
+        positive
+            .iter()
+            .all(|v| v.is_finite() && *v > 0.0 && *v <= 1e6)
+            && non_negative
+                .iter()
+                .all(|v| v.is_finite() && (0.0..=1e6).contains(v))
     }
 
     /// Time (s) allowed to reach a goal `path_length` metres away.

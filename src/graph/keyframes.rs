@@ -79,8 +79,9 @@ pub struct KeyframeGraph {
     background: bool,
     /// A loop moved the map and no job has taken it in yet.
     wants_optimisation: bool,
-    /// The job in flight: its id and how many keyframes it covers.
-    in_flight: Option<(u64, usize)>,
+    /// The job in flight: its id, how many keyframes it covers, and how
+    /// many of the newest loop edges it is to optimise in.
+    in_flight: Option<(u64, usize, usize)>,
     jobs: u64,
     /// The next keyframe gets no chain edge (see [`Self::add_relocalized`]).
     unchained_next: bool,
@@ -241,9 +242,10 @@ impl KeyframeGraph {
         self.jobs += 1;
         let id = self.jobs;
         let new_loops = self.unoptimised_loop_edges();
+        let job_loops = self.unoptimised_loops;
         self.wants_optimisation = false;
         self.unoptimised_loops = 0;
-        self.in_flight = Some((id, self.keyframes.len()));
+        self.in_flight = Some((id, self.keyframes.len(), job_loops));
         Some(OptimisationJob {
             id,
             graph: self.graph.clone(),
@@ -258,7 +260,8 @@ impl KeyframeGraph {
     /// The job in flight was lost (its thread failed): the next
     /// [`take_job`](Self::take_job) covers its loops again.
     pub fn abandon_job(&mut self) {
-        if self.in_flight.take().is_some() {
+        if let Some((_, _, loops)) = self.in_flight.take() {
+            self.unoptimised_loops += loops;
             self.wants_optimisation = true;
         }
     }
@@ -272,7 +275,7 @@ impl KeyframeGraph {
         &mut self,
         result: OptimisationResult,
     ) -> Result<Option<AppliedOptimisation>, GraphError> {
-        let Some((id, covered)) = self.in_flight else {
+        let Some((id, covered, _)) = self.in_flight else {
             return Ok(None);
         };
         if id != result.id {
@@ -502,7 +505,7 @@ impl KeyframeGraph {
         let newest = self.keyframes.len().checked_sub(1)?;
         // A keyframe a job in flight covers stays: its result is indexed
         // by keyframe.
-        if !self.newest_agrees || self.in_flight.is_some_and(|(_, n)| newest < n) {
+        if !self.newest_agrees || self.in_flight.is_some_and(|(_, n, _)| newest < n) {
             return None;
         }
         let poses = self.graph.poses();
@@ -565,7 +568,10 @@ impl KeyframeGraph {
         if self.is_settled() {
             return Ok(None);
         }
-        self.in_flight = None;
+        // A superseded job's loops are optimised in here.
+        if let Some((_, _, loops)) = self.in_flight.take() {
+            self.unoptimised_loops += loops;
+        }
         self.wants_optimisation = false;
         let result = self.optimise(cfg).map(Some);
         if result.is_err() {
@@ -573,6 +579,7 @@ impl KeyframeGraph {
             // graph is settled and later optimisations do not fail on them.
             let new_loops = self.unoptimised_loop_edges();
             self.graph.remove_edges(&new_loops);
+            self.stats.accepted = self.stats.accepted.saturating_sub(new_loops.len());
             self.unoptimised_loops = 0;
         }
         result

@@ -136,7 +136,11 @@ impl StartSearch {
             Some((previous, motion)) => {
                 disambiguate(previous, lines, motion, &self.map, &self.config)
             }
-            None => global_localize(lines, &self.map, &self.config),
+            None => {
+                // Searching afresh: whatever the hint said is gone.
+                self.hinted = false;
+                global_localize(lines, &self.map, &self.config)
+            }
         };
         match result.map(|r| self.screen(r, free)) {
             Ok(r) if !r.ambiguous && !r.hypotheses.is_empty() => {
@@ -153,12 +157,16 @@ impl StartSearch {
                         .ok()
                         .map(|f| self.screen(f, free))
                 {
-                    let agrees = fresh.hypotheses.iter().any(|h| {
-                        (h.pose.x - best.pose.x).hypot(h.pose.y - best.pose.y)
-                            <= 2.0 * self.config.cluster_distance
-                            && wrap_angle(h.pose.theta - best.pose.theta).abs()
-                                <= 2.0 * self.config.cluster_angle
-                    });
+                    // A fresh set too full of alike places to judge by
+                    // says nothing against the tracked one, which was whole.
+                    let inconclusive = fresh.hypotheses.is_empty() && fresh.ambiguous;
+                    let agrees = inconclusive
+                        || fresh.hypotheses.iter().any(|h| {
+                            (h.pose.x - best.pose.x).hypot(h.pose.y - best.pose.y)
+                                <= 2.0 * self.config.cluster_distance
+                                && wrap_angle(h.pose.theta - best.pose.theta).abs()
+                                    <= 2.0 * self.config.cluster_angle
+                        });
                     if !agrees {
                         self.last = (!fresh.hypotheses.is_empty()).then_some((fresh, odometry));
                         return None;
