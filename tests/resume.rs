@@ -31,6 +31,29 @@ fn map_world(world: &str, dir: &Path) -> (DaemonConfig, PathBuf, Pose2) {
     (config, dir.join("map.json"), robot.map_origin().unwrap())
 }
 
+/// A new, empty directory for one test's files.
+fn fresh_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("clsmap-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+/// The robot's true pose now in the frame of the map made from `origin`.
+fn truth_now(robot: &VirtualRobot, origin: Pose2) -> Pose2 {
+    origin.between(&robot.robot().true_pose_at(robot.now()))
+}
+
+/// How far the daemon's pose is from the truth now: position (m) and
+/// heading (rad).
+fn pose_error(robot: &VirtualRobot, origin: Pose2) -> (f64, f64) {
+    let truth = truth_now(robot, origin);
+    let estimate = robot.live().pose_now().unwrap();
+    (
+        (estimate.x - truth.x).hypot(estimate.y - truth.y),
+        wrap_angle(estimate.theta - truth.theta).abs(),
+    )
+}
+
 /// Distance (m) from `p` to the nearest wall of the world.
 fn clearance(walls: &[[[f64; 2]; 2]], p: [f64; 2]) -> f64 {
     walls
@@ -137,14 +160,12 @@ fn restart(config: &DaemonConfig, map: &Path, origin: Pose2, start: Pose2) -> Re
         clsmap_base::Twist::ZERO,
         "still turning a second after found"
     );
-    let now = robot.now();
-    let truth = origin.between(&robot.robot().true_pose_at(now));
-    let estimate = robot.live().pose_now().unwrap();
+    let (error, heading_error) = pose_error(&robot, origin);
     Restart::Found {
         after,
         turned,
-        error: (estimate.x - truth.x).hypot(estimate.y - truth.y),
-        heading_error: wrap_angle(estimate.theta - truth.theta).abs(),
+        error,
+        heading_error,
     }
 }
 
@@ -177,9 +198,7 @@ fn a_restart_anywhere_in_a_mapped_world_finds_the_robot() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(20);
     for world in ["lab", "office", "loop"] {
-        let dir =
-            std::env::temp_dir().join(format!("clsmap-restart-{world}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let dir = fresh_dir(&format!("restart-{world}"));
         let (config, map_file, origin) = map_world(world, &dir);
         let map = ClsMap::load(&map_file, ClsMapConfig::default()).unwrap();
         let walls = clsmap::sim::WorldFile::builtin(world).unwrap().world;
@@ -271,8 +290,7 @@ fn a_restart_anywhere_in_a_mapped_world_finds_the_robot() {
 /// while it does not know where it is.
 #[test]
 fn a_kidnapped_robot_is_found_again_and_the_map_learns_nothing_meanwhile() {
-    let dir = std::env::temp_dir().join(format!("clsmap-kidnap-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = fresh_dir("kidnap");
     let (mut config, map_file, origin) = map_world("lab", &dir);
     let map = ClsMap::load(&map_file, ClsMapConfig::default()).unwrap();
     let walls = clsmap::sim::WorldFile::builtin("lab").unwrap().world;
@@ -333,15 +351,13 @@ fn a_kidnapped_robot_is_found_again_and_the_map_learns_nothing_meanwhile() {
     );
     robot.run_until(robot.now() + 1.0, |_| false);
     assert_eq!(robot.robot().applied_twist(), clsmap_base::Twist::ZERO);
-    let truth = origin.between(&robot.robot().true_pose_at(robot.now()));
-    let estimate = robot.live().pose_now().unwrap();
-    let error = (estimate.x - truth.x).hypot(estimate.y - truth.y);
+    let (error, heading_error) = pose_error(&robot, origin);
     println!(
         "kidnapped {:.1} m: missed after {missed_after:.2} s, found after {found_after:.2} s, then {error:.3} m off",
         (to.x - start.x).hypot(to.y - start.y)
     );
     assert!(error < 0.10, "{error}");
-    assert!(wrap_angle(estimate.theta - truth.theta).abs() < 2f64.to_radians());
+    assert!(heading_error < 2f64.to_radians(), "{heading_error}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -350,8 +366,7 @@ fn a_kidnapped_robot_is_found_again_and_the_map_learns_nothing_meanwhile() {
 /// In a new map a hint is refused: its frame is where the robot started.
 #[test]
 fn a_pose_hint_settles_a_robot_that_cannot_tell_its_place() {
-    let dir = std::env::temp_dir().join(format!("clsmap-hint-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = fresh_dir("hint");
     let (mut config, map_file, origin) = map_world("office", &dir);
     // The middle of the west room, which the east room repeats.
     let start = origin.between(&Pose2::new(4.0, 3.3, 0.7));
@@ -371,7 +386,7 @@ fn a_pose_hint_settles_a_robot_that_cannot_tell_its_place() {
     ));
     assert_eq!(robot.robot().applied_twist(), clsmap_base::Twist::ZERO);
 
-    let truth = origin.between(&robot.robot().true_pose_at(robot.now()));
+    let truth = truth_now(&robot, origin);
     let hint = Pose2::new(truth.x + 0.3, truth.y - 0.4, truth.theta + 0.15);
     robot.hint_pose(hint);
     let hinted_at = robot.now();
@@ -380,9 +395,7 @@ fn a_pose_hint_settles_a_robot_that_cannot_tell_its_place() {
     });
     assert!(found, "the hint was not taken");
     robot.run_until(robot.now() + 0.5, |_| false);
-    let truth = origin.between(&robot.robot().true_pose_at(robot.now()));
-    let estimate = robot.live().pose_now().unwrap();
-    let error = (estimate.x - truth.x).hypot(estimate.y - truth.y);
+    let (error, _) = pose_error(&robot, origin);
     println!(
         "hint 0.5 m / 8.6° off: found {:.2} s after it, then {error:.3} m off",
         robot.now() - hinted_at - 0.5

@@ -13,9 +13,10 @@
 
 use std::str::FromStr;
 
-use crate::geometry::{CogLine, Pose2, wrap_angle};
+use crate::geometry::{CogLine, Pose2};
 use crate::localize::global::{
     GlobalConfig, GlobalMap, GlobalResult, Hypothesis, disambiguate, global_localize, refute,
+    same_place,
 };
 use crate::map::cls::LocalRegion;
 
@@ -96,20 +97,17 @@ impl StartSearch {
             refined: false,
             degenerate: None,
         };
-        let result = GlobalResult {
-            hypotheses: vec![hint],
-            ambiguous: true,
-        };
-        StartSearch {
-            map: GlobalMap::new(walls),
-            config: GlobalConfig {
-                max_hypotheses: config.max_hypotheses.max(START_HYPOTHESES),
-                ..config
+        let mut search = StartSearch::new(walls, config);
+        search.last = Some((
+            GlobalResult {
+                hypotheses: vec![hint],
+                ambiguous: true,
             },
-            last: Some((result, odometry)),
-            hinted: true,
-            first_after_hint: true,
-        }
+            odometry,
+        ));
+        search.hinted = true;
+        search.first_after_hint = true;
+        search
     }
 
     /// One scan's lines (robot frame), its free space (the local region,
@@ -161,12 +159,10 @@ impl StartSearch {
                     // says nothing against the tracked one, which was whole.
                     let inconclusive = fresh.hypotheses.is_empty() && fresh.ambiguous;
                     let agrees = inconclusive
-                        || fresh.hypotheses.iter().any(|h| {
-                            (h.pose.x - best.pose.x).hypot(h.pose.y - best.pose.y)
-                                <= 2.0 * self.config.cluster_distance
-                                && wrap_angle(h.pose.theta - best.pose.theta).abs()
-                                    <= 2.0 * self.config.cluster_angle
-                        });
+                        || fresh
+                            .hypotheses
+                            .iter()
+                            .any(|h| same_place(&h.pose, &best.pose, &self.config));
                     if !agrees {
                         self.last = (!fresh.hypotheses.is_empty()).then_some((fresh, odometry));
                         return None;

@@ -33,5 +33,6 @@ mod vote;
 
 pub use config::GlobalConfig;
 pub use map::GlobalMap;
+pub(crate) use search::same_place;
 pub use search::{GlobalError, GlobalResult, Hypothesis, global_localize};
 pub use track::{disambiguate, refute};
