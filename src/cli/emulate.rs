@@ -24,6 +24,7 @@ pub struct LineFaults {
 pub fn emulate(
     link: Option<&Path>,
     start_baud: Option<u32>,
+    power_on: Option<f64>,
     faults: LineFaults,
 ) -> anyhow::Result<ExitCode> {
     for (name, p) in [
@@ -43,6 +44,10 @@ pub fn emulate(
             drop_per_byte: faults.drops,
             nak_every_nth_request: None,
         },
+        // A sensor that has been on for a while, unless a power-up is
+        // asked for: a host that opens the port long after the emulator
+        // started must not find it deaf.
+        power_on_delay: power_on_delay(power_on)?,
         ..EmulatorConfig::default()
     };
     if let Some(bps) = start_baud {
@@ -51,6 +56,12 @@ pub fn emulate(
         })?;
     }
     let stop = super::stop_flag()?;
+    if let Some(delay) = config.power_on_delay {
+        println!(
+            "powering up: deaf for {:.1} s, then the 90 power-on telegram",
+            delay.as_secs_f64()
+        );
+    }
     let pty = PtyEmulator::spawn(Emulator::new(config, Instant::now()), link)
         .context("cannot start the emulator")?;
     match link {
@@ -73,4 +84,15 @@ pub fn emulate(
     pty.stop().context("emulator failed")?;
     eprintln!("emulator stopped: {stats:?}");
     Ok(ExitCode::SUCCESS)
+}
+
+/// The boot time `--power-on` asks for (real units take up to 60 s).
+fn power_on_delay(seconds: Option<f64>) -> anyhow::Result<Option<Duration>> {
+    match seconds {
+        None => Ok(None),
+        Some(s) if s.is_finite() && (0.0..=120.0).contains(&s) => {
+            Ok(Some(Duration::from_secs_f64(s)))
+        }
+        Some(s) => bail!("--power-on {s}: seconds of boot time lie in [0, 120]"),
+    }
 }

@@ -125,6 +125,11 @@ enum Command {
         /// Line speed the emulated sensor was left at (it powers up at 9600).
         #[arg(long)]
         start_baud: Option<u32>,
+        /// Model a power-up: the sensor is deaf for this many seconds after
+        /// the start, then sends its `90` power-on telegram. Without it the
+        /// sensor has been on for a while and answers at once.
+        #[arg(long, value_name = "SECONDS")]
+        power_on: Option<f64>,
         /// Probability per byte of a flipped bit on the line.
         #[arg(long, default_value_t = 0.0)]
         bit_flips: f64,
@@ -318,6 +323,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Emulate {
             link,
             start_baud,
+            power_on,
             bit_flips,
             garbage,
             drops,
@@ -325,6 +331,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         } => emulate::emulate(
             link.as_deref(),
             start_baud,
+            power_on,
             emulate::LineFaults {
                 bit_flips,
                 garbage,

@@ -11,11 +11,17 @@ struct EmulatorProcess {
 
 impl EmulatorProcess {
     fn start(dir: &TempDir, link: &Path) -> EmulatorProcess {
+        Self::start_with(dir, link, &[])
+    }
+
+    /// `clsmap emulate --link LINK` with `args` after it.
+    fn start_with(dir: &TempDir, link: &Path, args: &[&str]) -> EmulatorProcess {
         let (stdout, stderr) = (dir.join("emulator.out"), dir.join("emulator.err"));
         let child = clsmap_command()
             .arg("emulate")
             .arg("--link")
             .arg(link)
+            .args(args)
             .stdin(Stdio::null())
             .stdout(File::create(&stdout).unwrap())
             .stderr(File::create(&stderr).unwrap())
@@ -117,4 +123,88 @@ fn probe_record_and_decode_against_the_emulator_then_stop_it_with_ctrl_c() {
         "the emulator left its link {} behind",
         link.display()
     );
+}
+
+/// Runs the independent host (`scripts/lms200_host.py`, Python's standard
+/// library only) against `link`; its JSON report and whether it succeeded.
+fn python_host(link: &Path, args: &[&str]) -> (serde_json::Value, bool) {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/lms200_host.py");
+    let out = Command::new("python3")
+        .arg(&script)
+        .arg("--port")
+        .arg(link)
+        .args(args)
+        .output()
+        .expect("python3 runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let report = serde_json::from_str(stdout.trim()).unwrap_or_else(|e| {
+        panic!(
+            "the host printed no report ({e}):\n{stdout}\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        )
+    });
+    (report, out.status.success())
+}
+
+/// An independent host, written from the telegram listing, finds the
+/// emulator a sensor: its status reply says the variant and units in
+/// force, the first request after each baud change is understood at once,
+/// and streaming runs at the listing's rate (TL Table 10-17: one
+/// 180°/0.5° scan in 9 at 38400 Bd, 4.2 Hz; one in 16 at 19200, 2.3 Hz).
+#[test]
+fn an_independent_host_finds_the_emulator_a_sensor() {
+    let dir = TempDir::new("emulator-host");
+    let link = dir.join("lms200");
+    let mut emulator = EmulatorProcess::start(&dir, &link);
+    for (baud, rate) in [("38400", 37.5 / 9.0), ("19200", 37.5 / 16.0)] {
+        // No pause between switching the host's speed and the request.
+        let (report, ok) = python_host(
+            &link,
+            &["--baud", baud, "--pause", "0", "--stream-seconds", "3"],
+        );
+        assert!(ok, "{baud} Bd: {report}\n{}", emulator.output());
+        let status = &report["status_9600"];
+        assert_eq!(status["scan_angle_deg"], 180, "{report}");
+        assert_eq!(status["resolution_centideg"], 50, "{report}");
+        assert_eq!(status["units_code"], 1, "mm: {report}");
+        assert_eq!(status["operating_mode"], 0x25, "{report}");
+        assert_eq!(status["address"], 1, "{report}");
+        assert_eq!(status["device_status"], 0, "{report}");
+        assert!(
+            status["software"].as_str().unwrap().starts_with("V02.10"),
+            "{report}"
+        );
+        assert_eq!(
+            report["variants_in_status"],
+            serde_json::json!([[100, 25], [180, 50]]),
+            "{report}"
+        );
+        assert_eq!(report["first_request_after_change_answered"], true);
+        assert_eq!(report["first_request_back_at_9600_answered"], true);
+        let measured = report["scan_rate_hz"].as_f64().unwrap();
+        assert!(
+            (measured / rate - 1.0).abs() < 0.05,
+            "{baud} Bd: {measured:.2} Hz streamed, the listing's rate is {rate:.2} Hz"
+        );
+    }
+    let status = emulator.interrupt();
+    assert!(status.success(), "{}", emulator.output());
+    let output = emulator.output();
+    assert!(
+        output.contains("garbled_input_bytes: 0,"),
+        "a request was heard at the wrong speed:\n{output}"
+    );
+}
+
+/// Asked to model a power-up, the emulator is deaf while it boots; by
+/// default it has been on a while and answers the first request at once
+/// (the test above starts its host as soon as the link appears).
+#[test]
+fn the_emulator_boots_only_when_asked_to() {
+    let dir = TempDir::new("emulator-boot");
+    let link = dir.join("lms200");
+    let _emulator = EmulatorProcess::start_with(&dir, &link, &["--power-on", "3"]);
+    let (report, ok) = python_host(&link, &["--baud", "9600", "--stream-seconds", "0.2"]);
+    assert!(!ok, "answered while booting: {report}");
+    assert_eq!(report["failed"], "status request at 9600 Bd", "{report}");
 }

@@ -185,15 +185,7 @@ fn run(
     while !controls.stop.load(Ordering::SeqCst) {
         let now = Instant::now();
         apply_controls(&mut emulator, controls, now);
-        // The host's line speed, as its termios says.
-        if let Ok(bps) = master.baud_rate()
-            && bps != host_bps
-        {
-            host_bps = bps;
-            // A speed the LMS200 cannot run at never matches the sensor.
-            let baud = Baud::from_bits_per_second(bps);
-            emulator.set_host_baud(baud.unwrap_or_else(|| mismatched(emulator.baud())));
-        }
+        follow_host_speed(&mut emulator, &master, &mut host_bps);
         if let Some(bytes) = emulator.poll_transmit(now) {
             write_or_drop(&mut master, &bytes)?;
         }
@@ -207,7 +199,13 @@ fn run(
             .ok();
         match master.read(&mut buf) {
             Ok(0) => {}
-            Ok(n) => emulator.handle_input(&buf[..n], Instant::now()),
+            Ok(n) => {
+                // The host may have switched its speed and written at once,
+                // while this thread waited: its bytes went out at the speed
+                // its termios says now, not at the one read before the wait.
+                follow_host_speed(&mut emulator, &master, &mut host_bps);
+                emulator.handle_input(&buf[..n], Instant::now());
+            }
             Err(e) if is_transient(&e) => {}
             Err(e) => return Err(PtyError::Io(e)),
         }
@@ -217,6 +215,19 @@ fn run(
         }
     }
     Ok(())
+}
+
+/// Tells the emulator the host's line speed, as the host's termios says,
+/// when it changed since `host_bps`.
+fn follow_host_speed(emulator: &mut Emulator, master: &TTYPort, host_bps: &mut u32) {
+    if let Ok(bps) = master.baud_rate()
+        && bps != *host_bps
+    {
+        *host_bps = bps;
+        // A speed the LMS200 cannot run at never matches the sensor.
+        let baud = Baud::from_bits_per_second(bps);
+        emulator.set_host_baud(baud.unwrap_or_else(|| mismatched(emulator.baud())));
+    }
 }
 
 fn apply_controls(emulator: &mut Emulator, controls: &Controls, now: Instant) {

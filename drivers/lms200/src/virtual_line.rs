@@ -358,14 +358,15 @@ mod tests {
     #[test]
     fn streams_at_the_rate_the_variant_and_line_speed_allow() {
         // Mirror at 75 Hz (13.32 ms per turn); a complete scan takes 1, 2 or
-        // 4 turns; a scan that completes while the line still carries the
-        // previous telegram is skipped (734 bytes at 38400 Bd: 191 ms, so
-        // one 180°/0.5° scan in 8 goes out).
+        // 4 turns; while the line carries a telegram longer than a scan
+        // period, ceil(wire time / period) scans are lost after it (TL Table
+        // 10-17: 732 bytes at 38400 Bd take 191 ms, so one 180°/0.5° scan in
+        // 9 goes out).
         let table = [
             (Variant::Fov180Res100, Baud::B500000, 75.075),
             (Variant::Fov180Res50, Baud::B500000, 37.538),
             (Variant::Fov100Res25, Baud::B500000, 18.769),
-            (Variant::Fov180Res50, Baud::B38400, 4.692),
+            (Variant::Fov180Res50, Baud::B38400, 4.171),
         ];
         for (variant, baud, expected_hz) in table {
             let config = LinkConfig {

@@ -14,6 +14,23 @@ use super::{Emulator, OperatingMode};
 /// Length of the `B1` status data (TL Table 7-33; the real frame is 160 bytes).
 const STATUS_DATA_LEN: usize = 152;
 
+/// Field offsets in a `B1` status reply, counted from the first byte after
+/// the reply code; 16-bit words little-endian.
+mod status {
+    pub const DEVICE_STATUS: usize = 8;
+    pub const VARIANT: usize = 17;
+    pub const MEASURING_MODE: usize = 101;
+    /// Scan angle, whole degrees (u16).
+    pub const SCAN_ANGLE: usize = 106;
+    /// Angular resolution, 1/100° (u16).
+    pub const RESOLUTION: usize = 108;
+    /// 0: 9600 Bd after power-on; 1: the speed stored with `66 01`.
+    pub const PERMANENT_BAUD: usize = 118;
+    pub const ADDRESS: usize = 119;
+    /// 0x00 cm, 0x01 mm.
+    pub const UNITS: usize = 121;
+}
+
 /// Longest pause between two bytes of one request (TL §4.3).
 const MAX_REQUEST_BYTE_GAP: Duration = Duration::from_millis(6);
 
@@ -241,6 +258,29 @@ impl Emulator {
                 OperatingMode::ContinuousInterlaced => 0x2A,
                 OperatingMode::Diagnostic => 0x10,
             }
+        };
+        // Offsets after the B1 code, as hosts read them (sicktoolbox's
+        // status parse; TL Table 7-31). Fields a host never reads (the
+        // pollution and calibration values, counters) stay zero, and so does
+        // the line-speed word, whose encoding the notes do not give (hosts
+        // find the speed by trying it).
+        data[status::DEVICE_STATUS] = 0x00; // ok
+        data[status::VARIANT] = 0x00; // standard device (type 6)
+        data[status::MEASURING_MODE] = self.block.measuring_mode_code();
+        let put_u16 = |data: &mut [u8], at: usize, v: u16| {
+            data[at..at + 2].copy_from_slice(&v.to_le_bytes());
+        };
+        put_u16(&mut data, status::SCAN_ANGLE, self.variant.fov_deg());
+        put_u16(
+            &mut data,
+            status::RESOLUTION,
+            self.variant.resolution_centideg(),
+        );
+        data[status::PERMANENT_BAUD] = u8::from(self.power_on_baud != Baud::B9600);
+        data[status::ADDRESS] = self.config.address;
+        data[status::UNITS] = match self.block.units() {
+            Some(Units::Cm) => 0x00,
+            _ => 0x01,
         };
         data
     }

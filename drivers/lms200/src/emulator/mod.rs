@@ -115,6 +115,8 @@ pub struct Emulator {
     eeprom_writes: u64,
     /// Next scan (or partial scan) completion while streaming.
     next_tick: Option<Instant>,
+    /// Scans completing before this are lost after the last one sent.
+    stream_resumes_at: Option<Instant>,
     /// Running number of streamed telegrams (the telegram index mod 256).
     telegram_sequence: u64,
     rx: RequestDecoder,
@@ -178,6 +180,7 @@ impl Emulator {
             block: config.config,
             eeprom_writes: 0,
             next_tick: None,
+            stream_resumes_at: None,
             telegram_sequence: 0,
             rx: RequestDecoder::new(),
             tx: PacedTx::new(),
@@ -353,6 +356,7 @@ impl Emulator {
         self.mode = OperatingMode::OnRequest;
         self.installation = false;
         self.next_tick = None;
+        self.stream_resumes_at = None;
         self.epoch = now;
     }
 

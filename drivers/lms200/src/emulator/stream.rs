@@ -1,10 +1,11 @@
 //! Streaming: scans completing on the mirror's phase, paced onto the line.
 //!
-//! A scan that completes while the line is still busy with the previous
-//! telegram is skipped, as the sensor does. This pure wire-time model sends
-//! one 180°/0.5° scan in 8 at 38400 Bd (4.7 Hz); TL Table 10-17 lists one in
-//! 9 (4.2 Hz) there, so the real sensor spends some 20 ms per telegram on top
-//! of the wire time at the slow rates. That overhead is not modelled.
+//! While a telegram is on the line the sensor loses the scans completing
+//! meanwhile, and it loses the first one completing after the line is free
+//! too: TL Table 10-17 counts `ceil(wire time / scan period)` lost scans
+//! between two sent ones whenever the wire time exceeds a scan period (one
+//! 180°/0.5° scan in 9 at 38400 Bd, 4.2 Hz; one in 30 at 9600), and none
+//! when the line keeps up (500 kBd).
 
 use std::time::{Duration, Instant};
 
@@ -18,6 +19,7 @@ impl Emulator {
     /// Enters `mode`; streaming modes start ticking on the mirror phase.
     pub(super) fn set_mode(&mut self, mode: OperatingMode, now: Instant) {
         self.mode = mode;
+        self.stream_resumes_at = None;
         self.next_tick = self
             .tick_period()
             .map(|period| self.next_boundary(now, period));
@@ -69,12 +71,16 @@ impl Emulator {
         if self.power != Power::Ready || self.silent_until.is_some_and(|t| at < t) {
             return;
         }
-        if !self.tx.is_idle(at) {
+        if !self.tx.is_idle(at) || self.stream_resumes_at.is_some_and(|t| at < t) {
             self.stats.scans_skipped += 1;
             return;
         }
         let partial = self.mode == OperatingMode::ContinuousInterlaced;
         self.queue_scan(at, partial, SegmentKind::Scan);
+        self.stream_resumes_at = self
+            .tx
+            .next_completion(self.baud.bits_per_second())
+            .and_then(|done| first_sendable_tick(at, done, period));
     }
 
     /// Measures and queues a scan that completed at `at` (streamed, or the
@@ -136,5 +142,51 @@ impl Emulator {
             self.sent_scans.push_back(log);
         }
         self.queue_frame(&Reply::ScanData(scan), 0x80, at, kind, AfterSent::Nothing);
+    }
+}
+
+/// The first scan completion that can be sent after a telegram queued at
+/// `sent` whose last byte leaves at `done`, on a grid of `period` (TL
+/// Table 10-17): `None` when the telegram fits in one period.
+fn first_sendable_tick(sent: Instant, done: Instant, period: Duration) -> Option<Instant> {
+    let wire = done.saturating_duration_since(sent).as_nanos();
+    let p = period.as_nanos().max(1);
+    if wire <= p {
+        return None;
+    }
+    let lost = wire.div_ceil(p);
+    let offset = u64::try_from((lost + 1) * p).ok()?;
+    Some(sent + Duration::from_nanos(offset))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::emulator::wire::wire_time;
+
+    /// Lost scans between two sent ones, as TL Table 10-17 lists them.
+    fn lost(frame_bytes: usize, bps: u32, period_ms: f64) -> u128 {
+        let t0 = Instant::now();
+        let period = Duration::from_secs_f64(period_ms / 1000.0);
+        let done = t0 + wire_time(frame_bytes, bps);
+        match first_sendable_tick(t0, done, period) {
+            None => 0,
+            Some(t) => (t - t0).as_nanos() / period.as_nanos() - 1,
+        }
+    }
+
+    #[test]
+    fn lost_scans_follow_the_telegram_listing() {
+        // (frame bytes, scan period ms): 180°/1°, 180°/0.5°, 100°/0.25°.
+        let rows = [
+            ((372, 13.32), [30, 15, 8, 0]),
+            ((732, 26.64), [29, 15, 8, 0]),
+            ((812, 53.28), [16, 8, 4, 0]),
+        ];
+        for ((bytes, period), expected) in rows {
+            for (bps, want) in [9600, 19200, 38400, 500_000].into_iter().zip(expected) {
+                assert_eq!(lost(bytes, bps, period), want, "{bytes} bytes at {bps} Bd");
+            }
+        }
     }
 }
