@@ -27,7 +27,7 @@ mod status {
     /// 0: 9600 Bd after power-on; 1: the speed stored with `66 01`.
     pub const PERMANENT_BAUD: usize = 118;
     pub const ADDRESS: usize = 119;
-    /// 0x00 cm, 0x01 mm.
+    /// 0x00 cm, 0x01 mm, as in the configuration block.
     pub const UNITS: usize = 121;
 }
 
@@ -260,7 +260,7 @@ impl Emulator {
             }
         };
         // Offsets after the B1 code, as hosts read them (sicktoolbox's
-        // status parse; TL Table 7-31). Fields a host never reads (the
+        // status parse). Fields a host never reads (the
         // pollution and calibration values, counters) stay zero, and so does
         // the line-speed word, whose encoding the notes do not give (hosts
         // find the speed by trying it).
@@ -278,10 +278,8 @@ impl Emulator {
         );
         data[status::PERMANENT_BAUD] = u8::from(self.power_on_baud != Baud::B9600);
         data[status::ADDRESS] = self.config.address;
-        data[status::UNITS] = match self.block.units() {
-            Some(Units::Cm) => 0x00,
-            _ => 0x01,
-        };
+        // The same code as the configuration block's (00 cm, 01 mm).
+        data[status::UNITS] = self.block.units().unwrap_or(Units::Mm).config_code();
         data
     }
 }
