@@ -14,6 +14,7 @@ pub mod localize;
 pub mod map;
 pub mod pipeline;
 pub mod render;
+pub mod ros2;
 #[cfg(feature = "sim")]
 pub mod sim;
 
@@ -40,7 +41,8 @@ mod layers {
     const LAYERS: &[(&str, &[&str])] = &[
         ("geometry", &[]),
         ("files", &["geometry"]),
-        ("input", &["geometry", "files"]),
+        ("ros2", &[]),
+        ("input", &["geometry", "files", "ros2"]),
         ("sim", &["geometry"]),
         ("eval", &["geometry", "files"]),
         ("map", &["geometry", "files"]),
@@ -51,20 +53,20 @@ mod layers {
         (
             "pipeline",
             &[
-                "geometry", "files", "input", "eval", "map", "localize", "render", "graph",
+                "geometry", "files", "input", "eval", "map", "localize", "render", "graph", "ros2",
             ],
         ),
         (
             "daemon",
             &[
-                "geometry", "files", "input", "eval", "map", "localize", "render", "graph",
+                "geometry", "files", "input", "eval", "map", "localize", "render", "graph", "ros2",
                 "pipeline", "explore", "sim",
             ],
         ),
         (
             "demo",
             &[
-                "geometry", "files", "input", "eval", "map", "localize", "render", "graph",
+                "geometry", "files", "input", "eval", "map", "localize", "render", "graph", "ros2",
                 "pipeline", "explore", "sim", "daemon",
             ],
         ),

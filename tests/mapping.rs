@@ -507,3 +507,77 @@ fn a_saved_map_is_localized_in_and_extended() {
     );
     extended.cls_map().check_invariants().unwrap();
 }
+
+/// The Python that runs the bag scripts: `CLSMAP_PYTHON` (CI sets it to
+/// a virtual environment with PyPI `rosbags`), else `python3`.
+fn python_with_rosbags() -> std::process::Command {
+    let python = std::env::var("CLSMAP_PYTHON").unwrap_or_else(|_| "python3".into());
+    let probe = std::process::Command::new(&python)
+        .args(["-c", "import rosbags"])
+        .output();
+    assert!(
+        probe.is_ok_and(|o| o.status.success()),
+        "{python} cannot import rosbags: python3 -m venv .venv && .venv/bin/pip install \
+         rosbags==0.11.9, then CLSMAP_PYTHON=.venv/bin/python"
+    );
+    std::process::Command::new(python)
+}
+
+/// A ROS 2 user's bag of the CSAIL run, written by an independent writer
+/// (PyPI `rosbags`: LaserScan on /scan, Odometry on /odom), maps to the
+/// trajectory the CARMEN log gives, pose for pose within 1 mm, with the
+/// same score.
+#[test]
+#[ignore = "needs PyPI rosbags; CI runs it: cargo test --test mapping rosbags -- --ignored"]
+fn a_rosbags_bag_of_the_csail_log_maps_as_the_carmen_log() {
+    let Some(dir) = csail_dir() else { return };
+    let work = tempfile::tempdir().unwrap();
+    let bag = work.path().join("csail_bag");
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scripts/carmen_to_rosbag2.py");
+    let out = python_with_rosbags()
+        .arg(&script)
+        .arg(dir.join("mit-csail.clf"))
+        .arg(&bag)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(bag.join("metadata.yaml").is_file());
+
+    let map = |input: &std::path::Path, name: &str| {
+        let out = work.path().join(name);
+        let summary = run_offline_mapping(
+            input,
+            &out,
+            &MapperConfig::default(),
+            &MapRunOptions::default(),
+            &mut |_| {},
+        )
+        .unwrap();
+        let tum = read_tum(std::io::BufReader::new(
+            std::fs::File::open(out.join("trajectory.tum")).unwrap(),
+        ))
+        .unwrap();
+        let errors =
+            clsmap::pipeline::evaluate_relations(&tum, &dir.join("mit-csail.relations")).unwrap();
+        (summary, tum, errors)
+    };
+    let (from_bag, bag_tum, bag_errors) = map(&bag, "from-bag");
+    let (from_log, log_tum, log_errors) = map(&dir.join("mit-csail.clf"), "from-log");
+    show("rosbags bag", &bag_errors);
+    show("CARMEN log", &log_errors);
+    assert_eq!(from_bag.scans, from_log.scans);
+    assert_eq!(from_bag.skipped_input, 0);
+    assert_eq!(bag_tum.len(), log_tum.len());
+    for ((tb, pb), (tl, pl)) in bag_tum.iter().zip(&log_tum) {
+        assert!((tb - tl).abs() < 1e-6, "{tb} {tl}");
+        assert!(
+            (pb.x - pl.x).hypot(pb.y - pl.y) < 1e-3,
+            "at {tb}: {pb:?} vs {pl:?}"
+        );
+    }
+    assert!((bag_errors.translation_m.mean - log_errors.translation_m.mean).abs() < 1e-3);
+}

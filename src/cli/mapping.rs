@@ -20,12 +20,10 @@ pub fn map(
     out: &Path,
     config: Option<&Path>,
     relations: Option<&Path>,
-    draw_loops: bool,
-    strict: bool,
-    start_from: Option<(&Path, pipeline::MapMode)>,
+    run: &pipeline::MapRunOptions<'_>,
 ) -> anyhow::Result<ExitCode> {
     let config = mapper_config(config)?;
-    if let Some((map, _)) = start_from {
+    if let Some((map, _)) = run.start_from {
         let written = out.join(pipeline::MAP_FILE);
         if let (Ok(a), Ok(b)) = (map.canonicalize(), written.canonicalize())
             && a == b
@@ -53,17 +51,7 @@ pub fn map(
             bar.set_message(format!("{} scans", p.scans));
         }
     };
-    let result = pipeline::run_offline_mapping(
-        input,
-        out,
-        &config,
-        &pipeline::MapRunOptions {
-            draw_loops,
-            strict,
-            start_from,
-        },
-        &mut on_progress,
-    );
+    let result = pipeline::run_offline_mapping(input, out, &config, run, &mut on_progress);
     bar.finish_and_clear();
     let summary = result.with_context(|| format!("cannot map {}", input.display()))?;
     let t = &summary.mean_time;

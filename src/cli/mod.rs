@@ -80,14 +80,20 @@ enum Command {
         #[arg(long)]
         port: PathBuf,
     },
-    /// Capture the raw telegram stream of an LMS200 into a recording.
+    /// Capture the raw telegram stream of an LMS200 into a recording, a
+    /// rosbag2 MCAP bag, or both.
+    #[command(group(clap::ArgGroup::new("output").required(true).multiple(true).args(["out", "bag"])))]
     Record {
         /// Serial device.
         #[arg(long)]
         port: PathBuf,
-        /// Recording to write.
+        /// Recording to write (clsmap's own format).
         #[arg(long)]
-        out: PathBuf,
+        out: Option<PathBuf>,
+        /// rosbag2 MCAP bag to write: sensor_msgs/LaserScan on /scan and
+        /// the recording's bytes on /lms200/recording (nothing is lost).
+        #[arg(long)]
+        bag: Option<PathBuf>,
         /// Stop after this many scans (default: until Ctrl-C).
         #[arg(long)]
         scans: Option<u64>,
@@ -149,7 +155,8 @@ enum Command {
     /// then 4 (the map was written from the rest), 0 when all input was
     /// used.
     Map {
-        /// CARMEN log (.clf/.log) or clsmap recording.
+        /// CARMEN log (.clf/.log), clsmap recording, or rosbag2 MCAP bag
+        /// (a .mcap file or a bag directory).
         input: PathBuf,
         /// Directory for trajectory.tum, map.json and map.svg.
         #[arg(long)]
@@ -176,6 +183,8 @@ enum Command {
         /// (new keyframes join it, loops close against it).
         #[arg(long, default_value = "localize", requires = "map")]
         mode: String,
+        #[command(flatten)]
+        bag: BagArgs,
     },
     /// Draw a CLS map (map.json) as SVG, or export it as a ROS map_server
     /// occupancy grid (PGM + YAML) when the output ends in `.pgm`.
@@ -229,6 +238,52 @@ enum Command {
         #[arg(long)]
         relations: PathBuf,
     },
+}
+
+/// Which topics of a rosbag2 bag are mapped.
+#[derive(Debug, Clone, clap::Args)]
+struct BagArgs {
+    /// Bag input: the sensor_msgs/LaserScan topic.
+    #[arg(long, default_value = "/scan")]
+    scan_topic: String,
+    /// Bag input: the nav_msgs/Odometry topic.
+    #[arg(long, default_value = "/odom", conflicts_with = "tf")]
+    odom_topic: String,
+    /// Bag input: take odometry from /tf (the base frame in the odometry
+    /// frame) instead of an Odometry topic.
+    #[arg(long)]
+    tf: bool,
+    /// Bag input: map the scans without odometry (a sensor-only bag).
+    #[arg(long, conflicts_with_all = ["tf", "odom_topic"])]
+    no_odometry: bool,
+    /// With --tf: the odometry frame.
+    #[arg(long, default_value = "odom", requires = "tf")]
+    odom_frame: String,
+    /// With --tf: the robot's base frame.
+    #[arg(long, default_value = "base_link", requires = "tf")]
+    base_frame: String,
+}
+
+impl BagArgs {
+    fn log_options(self) -> clsmap::input::LogOptions {
+        use clsmap::input::{BagOdometry, BagTopics};
+        let odometry = if self.no_odometry {
+            BagOdometry::None
+        } else if self.tf {
+            BagOdometry::Tf {
+                parent: self.odom_frame,
+                child: self.base_frame,
+            }
+        } else {
+            BagOdometry::Topic(self.odom_topic)
+        };
+        clsmap::input::LogOptions {
+            bag: BagTopics {
+                scan: self.scan_topic,
+                odometry,
+            },
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -308,11 +363,22 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Record {
             port,
             out,
+            bag,
             scans,
             baud,
             variant,
             units,
-        } => sensor::record(&port, &out, scans, baud, &variant, units),
+        } => sensor::record(
+            &port,
+            &sensor::RecordOutputs {
+                recording: out.as_deref(),
+                bag: bag.as_deref(),
+            },
+            scans,
+            baud,
+            &variant,
+            units,
+        ),
         Command::Decode {
             file,
             raw,
@@ -348,18 +414,23 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             strict,
             map,
             mode,
+            bag,
         } => {
             let mode: clsmap::pipeline::MapMode = mode
                 .parse()
                 .map_err(|e: String| anyhow::anyhow!("--mode: {e}"))?;
+            let log = bag.log_options();
             mapping::map(
                 &input,
                 &out,
                 config.as_deref(),
                 relations.as_deref(),
-                draw_loops,
-                strict,
-                map.as_deref().map(|m| (m, mode)),
+                &clsmap::pipeline::MapRunOptions {
+                    draw_loops,
+                    strict,
+                    start_from: map.as_deref().map(|m| (m, mode)),
+                    log: Some(&log),
+                },
             )
         }
         Command::Eval {

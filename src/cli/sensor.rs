@@ -8,12 +8,16 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, bail};
-use clsmap::input::lms200::{note_mode, scan_time_us, seconds};
+use clsmap::input::bag::laser_scan;
+use clsmap::input::lms200::{note_mode, range_scan, scan_time_us, seconds};
+use clsmap::ros2::bag::{BagTopic, BagWriter, Durability};
+use clsmap::ros2::{ByteArray, LaserScan};
 use lms200::driver::SerialDriver;
 use lms200::link::{Event, LinkConfig};
 use lms200::recording::{Record, RecordingReader};
 use lms200::{Baud, DecodeEvent, Decoder, MeasuringMode, Reply, Scan, Units, Variant};
 use serde::Serialize;
+use std::sync::{Arc, Mutex};
 
 use super::{DecodeFormat, UnitsArg};
 
@@ -84,9 +88,152 @@ pub fn probe(port: &Path) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// Where `record` writes.
+pub struct RecordOutputs<'a> {
+    pub recording: Option<&'a Path>,
+    pub bag: Option<&'a Path>,
+}
+
+/// The recording's bytes as the driver writes them, shared with the bag
+/// writer, which moves them into `/lms200/recording` messages.
+#[derive(Clone, Default)]
+struct SharedBytes(Arc<Mutex<Vec<u8>>>);
+
+impl SharedBytes {
+    fn take(&self) -> Vec<u8> {
+        self.0
+            .lock()
+            .map(|mut b| std::mem::take(&mut *b))
+            .unwrap_or_default()
+    }
+}
+
+impl Write for SharedBytes {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0
+            .lock()
+            .map_err(|_| std::io::Error::other("recording buffer poisoned"))?
+            .extend_from_slice(buf);
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// Writes to both the recording file and the bag's buffer.
+struct Tee(Vec<Box<dyn Write + Send>>);
+
+impl Write for Tee {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        for w in &mut self.0 {
+            w.write_all(buf)?;
+        }
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.0.iter_mut().try_for_each(|w| w.flush())
+    }
+}
+
+/// The bag `record --bag` writes, as the scans come.
+struct RecordBag {
+    writer: BagWriter,
+    scan: BagTopic<LaserScan>,
+    raw: BagTopic<ByteArray>,
+    bytes: SharedBytes,
+    /// Wall-clock time minus the monotonic clock, to stamp scans (s).
+    clock_offset: f64,
+    started: Instant,
+    last_flush: Instant,
+    mode: MeasuringMode,
+}
+
+impl RecordBag {
+    fn create(path: &Path, mode: MeasuringMode) -> anyhow::Result<RecordBag> {
+        let mut writer = BagWriter::create(path)?;
+        let scan = writer.topic::<LaserScan>("/scan", Durability::Volatile)?;
+        let raw = writer.topic::<ByteArray>(RECORDING_TOPIC, Durability::Volatile)?;
+        let started = Instant::now();
+        Ok(RecordBag {
+            writer,
+            scan,
+            raw,
+            bytes: SharedBytes::default(),
+            clock_offset: seconds(lms200::driver::unix_micros()),
+            started,
+            last_flush: started,
+            mode,
+        })
+    }
+
+    fn now_ns(&self) -> u64 {
+        let t = self.clock_offset + self.started.elapsed().as_secs_f64();
+        (t * 1e9) as u64
+    }
+
+    /// Moves the recording bytes written since the last call into a
+    /// message, then the scan (if any); the chunk is closed every second.
+    fn on_event(&mut self, scan: Option<&lms200::link::TimedScan>) -> anyhow::Result<()> {
+        self.drain()?;
+        if let Some(ts) = scan {
+            let since = ts
+                .timestamp
+                .saturating_duration_since(self.started)
+                .as_secs_f64();
+            let before = self
+                .started
+                .saturating_duration_since(ts.timestamp)
+                .as_secs_f64();
+            let t = self.clock_offset + since - before;
+            if let Some(rs) = range_scan(&ts.scan, t, self.mode) {
+                let reach = match ts.units {
+                    Units::Mm => 8.183,
+                    Units::Cm => 81.83,
+                };
+                // The mirror turns at 75 Hz; a 0.5° or 0.25° scan
+                // interlaces 2 or 4 turns (the beams' order in time is
+                // then not their order in angle; the increment is that
+                // of one turn).
+                let turn = 1.0 / 75.0;
+                let turns = (1f64.to_radians() / rs.angle_increment).round().max(1.0);
+                let time_increment = turn * rs.angle_increment / std::f64::consts::TAU;
+                let msg = laser_scan(&rs, "laser", reach, time_increment, turn * turns);
+                self.writer.write(&mut self.scan, (t * 1e9) as u64, &msg)?;
+            }
+        }
+        if self.last_flush.elapsed() >= Duration::from_secs(1) {
+            self.writer.flush()?;
+            self.last_flush = Instant::now();
+        }
+        Ok(())
+    }
+
+    fn drain(&mut self) -> anyhow::Result<()> {
+        let data = self.bytes.take();
+        if !data.is_empty() {
+            let ns = self.now_ns();
+            self.writer.write(&mut self.raw, ns, &ByteArray { data })?;
+        }
+        Ok(())
+    }
+
+    fn finish(mut self) -> anyhow::Result<()> {
+        self.drain()?;
+        self.writer.finish()?;
+        Ok(())
+    }
+}
+
+/// The topic whose messages, concatenated, are the clsmap recording of
+/// the run byte for byte.
+pub const RECORDING_TOPIC: &str = "/lms200/recording";
+
 pub fn record(
     port: &Path,
-    out: &Path,
+    outputs: &RecordOutputs<'_>,
     scans: Option<u64>,
     baud: u32,
     variant: &str,
@@ -111,23 +258,41 @@ pub fn record(
         units_name(units),
         config.measuring_mode.code()
     );
+    let mode = config.measuring_mode;
     // The port first: a wrong --port must not cost an existing file.
     let driver = SerialDriver::open(port, config)
         .with_context(|| format!("cannot open {}", port.display()))?;
-    // Never overwrite a recording: it may be the only copy of a run.
-    let file = std::fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(out)
-        .with_context(|| {
-            format!(
-                "cannot create the recording {} (an existing file is never overwritten)",
-                out.display()
-            )
-        })?;
-    let mut driver = driver.with_recording(Box::new(BufWriter::new(file)), &note)?;
+    let mut sinks: Vec<Box<dyn Write + Send>> = Vec::new();
+    let mut written = Vec::new();
+    if let Some(out) = outputs.recording {
+        // Never overwrite a recording: it may be the only copy of a run.
+        let file = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(out)
+            .with_context(|| {
+                format!(
+                    "cannot create the recording {} (an existing file is never overwritten)",
+                    out.display()
+                )
+            })?;
+        sinks.push(Box::new(BufWriter::new(file)));
+        written.push(out.display().to_string());
+    }
+    let mut bag = match outputs.bag {
+        Some(path) => {
+            let bag = RecordBag::create(path, mode)?;
+            sinks.push(Box::new(bag.bytes.clone()));
+            written.push(path.display().to_string());
+            Some(bag)
+        }
+        None => None,
+    };
+    let written = written.join(" and ");
+    let mut driver = driver.with_recording(Box::new(Tee(sinks)), &note)?;
     let stop = super::stop_flag()?;
     let mut count = 0u64;
+    let mut bag_error = None;
     driver.run(
         || stop.load(Ordering::SeqCst),
         |event| {
@@ -135,8 +300,7 @@ pub fn record(
                 Event::Connected { baud, .. } => {
                     tracing::info!(
                         baud = baud.bits_per_second(),
-                        "streaming, recording to {}",
-                        out.display()
+                        "streaming, recording to {written}"
                     )
                 }
                 Event::Scan(_) => count += 1,
@@ -144,6 +308,18 @@ pub fn record(
                 Event::SensorSilent => tracing::warn!("sensor silent, re-initialising"),
                 Event::SensorRestarted => tracing::warn!("sensor restarted, re-initialising"),
                 _ => {}
+            }
+            if let Some(b) = bag.as_mut()
+                && bag_error.is_none()
+            {
+                let scan = match event {
+                    Event::Scan(ts) => Some(ts),
+                    _ => None,
+                };
+                if let Err(e) = b.on_event(scan) {
+                    bag_error = Some(e);
+                    return ControlFlow::Break(());
+                }
             }
             if scans.is_some_and(|n| count >= n) {
                 ControlFlow::Break(())
@@ -153,12 +329,16 @@ pub fn record(
         },
     )?;
     let stats = driver.stats();
+    drop(driver);
+    if let Some(e) = bag_error {
+        return Err(e);
+    }
+    if let Some(b) = bag {
+        b.finish()?;
+    }
     eprintln!(
-        "recorded {count} scans to {}; dropped frames {}, lost telegrams {}, re-initialisations {}",
-        out.display(),
-        stats.dropped_frames,
-        stats.lost_telegrams,
-        stats.reinits
+        "recorded {count} scans to {written}; dropped frames {}, lost telegrams {}, re-initialisations {}",
+        stats.dropped_frames, stats.lost_telegrams, stats.reinits
     );
     Ok(ExitCode::SUCCESS)
 }

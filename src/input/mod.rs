@@ -12,10 +12,12 @@
 //! the reader goes on with the next; the caller counts and reports them,
 //! or stops at the first (`--strict`). Other errors end the input.
 
+pub mod bag;
 pub mod carmen;
 pub mod lms200;
 pub mod odometry;
 
+pub use bag::{BagOdometry, BagScans, BagTopics};
 pub use carmen::{CarmenEntry, CarmenScans, MalformedLine, NO_RETURN_RANGE};
 pub use odometry::{OdometryError, OdometryTrack};
 
@@ -60,6 +62,29 @@ pub enum InputError {
     RecordingOdometry { offset: u64, error: OdometryError },
     #[error("{at}: scan time {t} s is not after the previous scan's {previous} s")]
     ScanOutOfOrder { at: String, t: f64, previous: f64 },
+    #[error(transparent)]
+    Bag(#[from] crate::ros2::bag::BagError),
+    #[error("the bag has no topic {topic} ({type_name}): {available}")]
+    MissingTopic {
+        topic: String,
+        type_name: &'static str,
+        available: String,
+    },
+    #[error("topic {topic} is {found}, not {expected}")]
+    TopicType {
+        topic: String,
+        found: String,
+        expected: &'static str,
+    },
+    #[error("{topic} message at {log_time} ns does not decode")]
+    BagMessage {
+        topic: String,
+        log_time: u64,
+        #[source]
+        error: crate::ros2::CdrError,
+    },
+    #[error("{at}: {error}")]
+    BagOdometry { at: String, error: OdometryError },
 }
 
 impl InputError {
@@ -76,6 +101,19 @@ impl InputError {
                 | InputError::RecordingOdometry { .. }
                 | InputError::ScanOutOfOrder { .. }
                 | InputError::Recording(RecordingError::Damaged { .. })
+                | InputError::BagMessage { .. }
+                | InputError::BagOdometry { .. }
+        )
+    }
+
+    /// Whether the input broke off here (a recording or a bag cut short
+    /// or damaged), so that what came before it can still be used.
+    pub fn is_break(&self) -> bool {
+        use crate::ros2::bag::BagError;
+        matches!(
+            self,
+            InputError::Recording(_)
+                | InputError::Bag(BagError::EndsEarly { .. } | BagError::Damaged { .. })
         )
     }
 }
@@ -116,21 +154,41 @@ impl<R: Read> Read for CountingReader<R> {
     }
 }
 
+/// How logs are read: for a bag, which of its topics.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct LogOptions {
+    pub bag: BagTopics,
+}
+
 impl LogFile {
-    /// Opens a log for streaming: an LMS200 recording (by its signature) or
-    /// a CARMEN text log.
+    /// Opens a log for streaming: an LMS200 recording (by its signature),
+    /// a rosbag2 MCAP bag (by its signature, or a bag directory) or a
+    /// CARMEN text log.
     pub fn open(path: &Path) -> Result<LogFile, InputError> {
+        Self::open_with(path, &LogOptions::default())
+    }
+
+    /// [`open`](Self::open) with a bag's topics chosen.
+    pub fn open_with(path: &Path, options: &LogOptions) -> Result<LogFile, InputError> {
         let open_error = |source| InputError::Open {
             path: path.to_owned(),
             source,
         };
+        let is_sqlite_bag = path.extension().is_some_and(|e| e == "db3");
+        if path.is_dir() || is_sqlite_bag {
+            return Self::open_bag(path, options);
+        }
         let mut file = File::open(path).map_err(open_error)?;
         let size = file.metadata().map_err(open_error)?.len();
-        // A recording starts with its signature; anything else is read as
-        // a CARMEN text log, which names the first line it cannot parse.
-        let mut head = [0u8; 7];
-        let is_recording =
-            file.read_exact(&mut head).is_ok() && head[..] == ::lms200::recording::MAGIC[..7];
+        // A recording and a bag start with their signatures; anything else
+        // is read as a CARMEN text log, which names the first line it
+        // cannot parse.
+        let mut head = [0u8; 8];
+        let head_read = file.read_exact(&mut head).is_ok();
+        if head_read && &head == b"\x89MCAP0\r\n" {
+            return Self::open_bag(path, options);
+        }
+        let is_recording = head_read && head[..7] == ::lms200::recording::MAGIC[..7];
         file.seek(SeekFrom::Start(0)).map_err(open_error)?;
         let bytes_read = Rc::new(Cell::new(0));
         let reader = BufReader::new(CountingReader {
@@ -144,6 +202,22 @@ impl LogFile {
         };
         Ok(LogFile {
             scans,
+            bytes_read,
+            size,
+        })
+    }
+
+    fn open_bag(path: &Path, options: &LogOptions) -> Result<LogFile, InputError> {
+        let size = crate::ros2::bag::bag_files(path)?
+            .iter()
+            .filter_map(|p| std::fs::metadata(p).ok())
+            .map(|m| m.len())
+            .sum();
+        let bytes_read = Rc::new(Cell::new(0));
+        let scans =
+            BagScans::open(path, options.bag.clone())?.with_progress(Rc::clone(&bytes_read));
+        Ok(LogFile {
+            scans: Box::new(scans),
             bytes_read,
             size,
         })
@@ -171,4 +245,9 @@ impl Iterator for LogFile {
 /// Opens a log file for streaming; see [`LogFile::open`].
 pub fn open_log(path: &Path) -> Result<LogFile, InputError> {
     LogFile::open(path)
+}
+
+/// Opens a log file for streaming with `options`; see [`LogFile::open_with`].
+pub fn open_log_with(path: &Path, options: &LogOptions) -> Result<LogFile, InputError> {
+    LogFile::open_with(path, options)
 }

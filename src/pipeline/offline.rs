@@ -11,7 +11,7 @@ use super::summary::MappingSummary;
 use super::{Mapper, PipelineError};
 use crate::eval::{EvalError, RelationErrors, evaluate_relations as evaluate_against};
 use crate::files::trajectory::StampedPose;
-use crate::input::{InputError, open_log};
+use crate::input::{LogOptions, open_log_with};
 use crate::pipeline::config::MapperConfig;
 
 /// Progress of [`run_offline_mapping`], reported after every scan.
@@ -34,6 +34,8 @@ pub struct MapRunOptions<'a> {
     /// Go on from a saved map, localizing in it or extending it, instead
     /// of starting a new one.
     pub start_from: Option<(&'a Path, MapMode)>,
+    /// How the input is read (a bag's topics); the defaults when `None`.
+    pub log: Option<&'a LogOptions>,
 }
 
 /// How many skipped input items are named one by one (the rest counted).
@@ -58,6 +60,7 @@ pub fn run_offline_mapping(
         draw_loops,
         strict,
         start_from,
+        log,
     } = *options;
     let mut mapper = match start_from {
         Some((map, mode)) => {
@@ -66,7 +69,7 @@ pub fn run_offline_mapping(
         }
         None => Mapper::new(*config),
     };
-    let mut log = open_log(input)?;
+    let mut log = open_log_with(input, log.unwrap_or(&LogOptions::default()))?;
     mapper.defer_cls_rebuild();
     let mut input_broken = None;
     let (mut skipped, mut examples) = (0, Vec::new());
@@ -81,7 +84,7 @@ pub fn run_offline_mapping(
                 }
                 continue;
             }
-            Err(InputError::Recording(e)) if !strict => {
+            Err(e) if e.is_break() && !strict => {
                 warn!("{e}: mapping the scans before the break");
                 input_broken = Some(e.to_string());
                 break;

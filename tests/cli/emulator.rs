@@ -208,3 +208,139 @@ fn the_emulator_boots_only_when_asked_to() {
     assert!(!ok, "answered while booting: {report}");
     assert_eq!(report["failed"], "status request at 9600 Bd", "{report}");
 }
+
+/// `clsmap record --bag` against the emulator: a bag of `scans` scans.
+fn record_bag(dir: &TempDir, scans: &str) -> PathBuf {
+    let link = dir.join("lms200");
+    let mut emulator = EmulatorProcess::start(dir, &link);
+    let bag = dir.join("run.mcap");
+    let recording = dir.join("run.rec");
+    let record = clsmap(&[
+        "record",
+        "--port",
+        arg(&link),
+        "--bag",
+        arg(&bag),
+        "--out",
+        arg(&recording),
+        "--scans",
+        scans,
+    ])
+    .succeeded();
+    assert!(
+        record.stderr.contains(&format!("recorded {scans} scans")),
+        "{record}"
+    );
+    assert!(emulator.interrupt().success(), "{}", emulator.output());
+    bag
+}
+
+/// The bag `record --bag` writes holds the scans as LaserScan and, on
+/// `/lms200/recording`, the recording written beside it byte for byte;
+/// `clsmap map` maps the bag, and refuses a topic the bag lacks by name.
+#[test]
+fn record_writes_a_rosbag2_bag_that_holds_the_whole_recording_and_maps() {
+    use clsmap::ros2::bag::BagReader;
+    use clsmap::ros2::{ByteArray, LaserScan, RosMessage};
+    let dir = TempDir::new("record-bag");
+    let bag = record_bag(&dir, "40");
+    let (mut scans, mut bytes) = (Vec::new(), Vec::new());
+    for m in BagReader::open(&bag).unwrap() {
+        let m = m.unwrap();
+        match m.topic.topic.as_str() {
+            "/scan" => scans.push(LaserScan::from_cdr(&m.data).unwrap()),
+            "/lms200/recording" => bytes.extend(ByteArray::from_cdr(&m.data).unwrap().data),
+            other => panic!("unexpected topic {other}"),
+        }
+    }
+    assert!(scans.len() >= 40, "{} scans", scans.len());
+    let s = &scans[0];
+    assert_eq!(
+        (s.ranges.len(), s.header.frame_id.as_str()),
+        (BEAMS, "laser")
+    );
+    assert!((s.angle_min + std::f32::consts::FRAC_PI_2).abs() < 1e-6);
+    assert!((s.range_max - 8.183).abs() < 1e-6);
+    assert!(
+        scans
+            .windows(2)
+            .all(|w| w[0].header.stamp.as_nanos() < w[1].header.stamp.as_nanos())
+    );
+    assert_eq!(bytes, std::fs::read(dir.join("run.rec")).unwrap());
+
+    let out = dir.join("map");
+    // The emulated sensor has no base: without odometry, and saying so.
+    let no_odometry = clsmap(&["map", arg(&bag), "--out", arg(&out)]).failed();
+    assert!(
+        no_odometry
+            .stderr
+            .contains("no topic /odom (nav_msgs/msg/Odometry)")
+            && no_odometry.stderr.contains("--no-odometry"),
+        "{no_odometry}"
+    );
+    let map = clsmap(&["map", arg(&bag), "--out", arg(&out), "--no-odometry"]).succeeded();
+    assert!(
+        map.stdout
+            .contains(&format!("mapped {} scans", scans.len())),
+        "{map}"
+    );
+    assert!(out.join("map.json").is_file());
+    let wrong = clsmap(&[
+        "map",
+        arg(&bag),
+        "--out",
+        arg(&out),
+        "--scan-topic",
+        "/laser",
+    ])
+    .failed();
+    assert!(
+        wrong
+            .stderr
+            .contains("no topic /laser (sensor_msgs/msg/LaserScan)")
+            && wrong.stderr.contains("/scan (sensor_msgs/msg/LaserScan)"),
+        "{wrong}"
+    );
+}
+
+/// An independent reader (PyPI `rosbags`, its ROS 2 Humble types) opens
+/// the bag `record --bag` writes and decodes every message.
+#[test]
+#[ignore = "needs PyPI rosbags; CI runs it: cargo test --test cli -- --ignored"]
+fn an_independent_reader_decodes_every_message_of_a_recorded_bag() {
+    let dir = TempDir::new("record-bag-rosbags");
+    let bag = record_bag(&dir, "20");
+    let python = std::env::var("CLSMAP_PYTHON").unwrap_or_else(|_| "python3".into());
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/ros2_bag_check.py");
+    let out = Command::new(&python)
+        .arg(&script)
+        .arg(&bag)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{python} {}: {}\n(needs PyPI rosbags: set CLSMAP_PYTHON to a Python that has it)",
+        script.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        report["topics"]["/scan"]["type"], "sensor_msgs/msg/LaserScan",
+        "{report}"
+    );
+    assert!(
+        report["topics"]["/scan"]["count"].as_u64().unwrap() >= 20,
+        "{report}"
+    );
+    assert_eq!(
+        report["topics"]["/lms200/recording"]["type"], "std_msgs/msg/UInt8MultiArray",
+        "{report}"
+    );
+    let scan = &report["first_scan"];
+    assert_eq!(scan["frame_id"], "laser");
+    assert_eq!(scan["beams"], BEAMS);
+    assert!((scan["angle_increment"].as_f64().unwrap() - 0.5f64.to_radians()).abs() < 1e-6);
+    assert_eq!(report["scan_stamps_increase"], true);
+    let recording = std::fs::read(dir.join("run.rec")).unwrap();
+    assert_eq!(report["recording_bytes"], recording.len());
+}

@@ -1,0 +1,510 @@
+//! The ROS 2 messages clsmap reads and writes, field for field as their
+//! ROS 2 definitions (names, order, types), with their CDR form and the
+//! `ros2msg` schema text that bags carry.
+
+use super::cdr::{CdrError, CdrReader, CdrWriter};
+
+/// A ROS 2 message type.
+pub trait RosMessage: Sized {
+    /// Its full type name, e.g. `sensor_msgs/msg/LaserScan`.
+    const TYPE: &'static str;
+    /// Writes the fields (after the encapsulation header).
+    fn write(&self, w: &mut CdrWriter);
+    /// Reads the fields.
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError>;
+    /// Its definition and those of the types it uses, as a bag's schema.
+    fn definition() -> String;
+
+    fn to_cdr(&self) -> Vec<u8> {
+        let mut w = CdrWriter::new();
+        self.write(&mut w);
+        w.finish()
+    }
+
+    fn from_cdr(bytes: &[u8]) -> Result<Self, CdrError> {
+        let mut r = CdrReader::new(bytes)?;
+        let m = Self::read(&mut r)?;
+        r.finish()?;
+        Ok(m)
+    }
+}
+
+/// The field lists of every type used here, keyed by `pkg/Type`.
+const FIELDS: &[(&str, &str)] = &[
+    ("builtin_interfaces/Time", "int32 sec\nuint32 nanosec\n"),
+    (
+        "std_msgs/Header",
+        "builtin_interfaces/Time stamp\nstring frame_id\n",
+    ),
+    (
+        "sensor_msgs/LaserScan",
+        "std_msgs/Header header\nfloat32 angle_min\nfloat32 angle_max\nfloat32 angle_increment\n\
+         float32 time_increment\nfloat32 scan_time\nfloat32 range_min\nfloat32 range_max\n\
+         float32[] ranges\nfloat32[] intensities\n",
+    ),
+    ("geometry_msgs/Point", "float64 x\nfloat64 y\nfloat64 z\n"),
+    ("geometry_msgs/Vector3", "float64 x\nfloat64 y\nfloat64 z\n"),
+    (
+        "geometry_msgs/Quaternion",
+        "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n",
+    ),
+    (
+        "geometry_msgs/Pose",
+        "geometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n",
+    ),
+    (
+        "geometry_msgs/PoseWithCovariance",
+        "geometry_msgs/Pose pose\nfloat64[36] covariance\n",
+    ),
+    (
+        "geometry_msgs/Twist",
+        "geometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular\n",
+    ),
+    (
+        "geometry_msgs/TwistWithCovariance",
+        "geometry_msgs/Twist twist\nfloat64[36] covariance\n",
+    ),
+    (
+        "nav_msgs/Odometry",
+        "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\n\
+         geometry_msgs/TwistWithCovariance twist\n",
+    ),
+    (
+        "geometry_msgs/Transform",
+        "geometry_msgs/Vector3 translation\ngeometry_msgs/Quaternion rotation\n",
+    ),
+    (
+        "geometry_msgs/TransformStamped",
+        "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform\n",
+    ),
+    (
+        "tf2_msgs/TFMessage",
+        "geometry_msgs/TransformStamped[] transforms\n",
+    ),
+    (
+        "std_msgs/MultiArrayDimension",
+        "string label\nuint32 size\nuint32 stride\n",
+    ),
+    (
+        "std_msgs/MultiArrayLayout",
+        "std_msgs/MultiArrayDimension[] dim\nuint32 data_offset\n",
+    ),
+    (
+        "std_msgs/UInt8MultiArray",
+        "std_msgs/MultiArrayLayout layout\nuint8[] data\n",
+    ),
+];
+
+fn fields_of(name: &str) -> &'static str {
+    FIELDS
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map_or("", |(_, f)| f)
+}
+
+/// The `ros2msg` schema of `pkg/msg/Type`: its fields, then each type it
+/// uses (depth first, once each) after a line of 80 `=` and `MSG: pkg/Type`,
+/// as rosbag2 writes them.
+fn schema(type_name: &str) -> String {
+    let short = type_name.replace("/msg/", "/");
+    let mut out = fields_of(&short).to_string();
+    let mut seen = vec![short.clone()];
+    let mut stack = vec![short];
+    while let Some(t) = stack.pop() {
+        for line in fields_of(&t).lines() {
+            let ty = line.split_whitespace().next().unwrap_or("");
+            let ty = ty.split('[').next().unwrap_or(ty);
+            if ty.contains('/') && !seen.iter().any(|s| s == ty) {
+                seen.push(ty.to_string());
+                out.push_str(&"=".repeat(80));
+                out.push_str(&format!("\nMSG: {ty}\n"));
+                out.push_str(fields_of(ty));
+                stack.push(ty.to_string());
+            }
+        }
+    }
+    out
+}
+
+/// `builtin_interfaces/Time`: seconds and nanoseconds since the epoch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Time {
+    pub sec: i32,
+    pub nanosec: u32,
+}
+
+impl Time {
+    /// The time `t` (s), rounded to the nanosecond; `None` if it does not
+    /// fit (before 1970 minus 68 years or after 2038 plus 68).
+    pub fn from_secs(t: f64) -> Option<Time> {
+        if !t.is_finite() {
+            return None;
+        }
+        let ns = (t * 1e9).round();
+        let sec = (ns / 1e9).floor();
+        let nanosec = ns - sec * 1e9;
+        let sec = i32::try_from(sec as i64).ok()?;
+        Some(Time {
+            sec,
+            nanosec: (nanosec as u32).min(999_999_999),
+        })
+    }
+
+    pub fn as_secs(&self) -> f64 {
+        f64::from(self.sec) + f64::from(self.nanosec) * 1e-9
+    }
+
+    /// Nanoseconds since the epoch (0 before it), as bags stamp messages.
+    pub fn as_nanos(&self) -> u64 {
+        u64::try_from(i64::from(self.sec) * 1_000_000_000 + i64::from(self.nanosec)).unwrap_or(0)
+    }
+
+    fn write(&self, w: &mut CdrWriter) {
+        w.i32(self.sec);
+        w.u32(self.nanosec);
+    }
+
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        Ok(Time {
+            sec: r.i32()?,
+            nanosec: r.u32()?,
+        })
+    }
+}
+
+/// `std_msgs/Header`.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Header {
+    pub stamp: Time,
+    pub frame_id: String,
+}
+
+impl Header {
+    fn write(&self, w: &mut CdrWriter) {
+        self.stamp.write(w);
+        w.string(&self.frame_id);
+    }
+
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        Ok(Header {
+            stamp: Time::read(r)?,
+            frame_id: r.string()?,
+        })
+    }
+}
+
+/// `sensor_msgs/LaserScan` (REP 117: a range outside
+/// `[range_min, range_max]` is invalid; `+inf` means no return, NaN an
+/// erroneous reading). `header.stamp` is the time of the first beam.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct LaserScan {
+    pub header: Header,
+    pub angle_min: f32,
+    pub angle_max: f32,
+    pub angle_increment: f32,
+    pub time_increment: f32,
+    pub scan_time: f32,
+    pub range_min: f32,
+    pub range_max: f32,
+    pub ranges: Vec<f32>,
+    pub intensities: Vec<f32>,
+}
+
+impl RosMessage for LaserScan {
+    const TYPE: &'static str = "sensor_msgs/msg/LaserScan";
+
+    fn write(&self, w: &mut CdrWriter) {
+        self.header.write(w);
+        for v in [
+            self.angle_min,
+            self.angle_max,
+            self.angle_increment,
+            self.time_increment,
+            self.scan_time,
+            self.range_min,
+            self.range_max,
+        ] {
+            w.f32(v);
+        }
+        w.f32_seq(&self.ranges);
+        w.f32_seq(&self.intensities);
+    }
+
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        Ok(LaserScan {
+            header: Header::read(r)?,
+            angle_min: r.f32()?,
+            angle_max: r.f32()?,
+            angle_increment: r.f32()?,
+            time_increment: r.f32()?,
+            scan_time: r.f32()?,
+            range_min: r.f32()?,
+            range_max: r.f32()?,
+            ranges: r.f32_seq()?,
+            intensities: r.f32_seq()?,
+        })
+    }
+
+    fn definition() -> String {
+        schema(Self::TYPE)
+    }
+}
+
+/// `geometry_msgs/Vector3` and `geometry_msgs/Point` (same fields).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Vector3 {
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+}
+
+impl Vector3 {
+    fn write(&self, w: &mut CdrWriter) {
+        w.f64(self.x);
+        w.f64(self.y);
+        w.f64(self.z);
+    }
+
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        Ok(Vector3 {
+            x: r.f64()?,
+            y: r.f64()?,
+            z: r.f64()?,
+        })
+    }
+}
+
+/// `geometry_msgs/Quaternion`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Quaternion {
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+    pub w: f64,
+}
+
+impl Default for Quaternion {
+    fn default() -> Self {
+        Quaternion::from_yaw(0.0)
+    }
+}
+
+impl Quaternion {
+    /// A rotation by `yaw` (rad) about z.
+    pub fn from_yaw(yaw: f64) -> Quaternion {
+        let (s, c) = (0.5 * yaw).sin_cos();
+        Quaternion {
+            x: 0.0,
+            y: 0.0,
+            z: s,
+            w: c,
+        }
+    }
+
+    /// The rotation's heading about z (rad, −π..π); roll and pitch, which a
+    /// planar robot does not have, are ignored.
+    pub fn yaw(&self) -> f64 {
+        let siny = 2.0 * (self.w * self.z + self.x * self.y);
+        let cosy = 1.0 - 2.0 * (self.y * self.y + self.z * self.z);
+        siny.atan2(cosy)
+    }
+
+    fn write(&self, w: &mut CdrWriter) {
+        for v in [self.x, self.y, self.z, self.w] {
+            w.f64(v);
+        }
+    }
+
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        Ok(Quaternion {
+            x: r.f64()?,
+            y: r.f64()?,
+            z: r.f64()?,
+            w: r.f64()?,
+        })
+    }
+}
+
+fn write_covariance(w: &mut CdrWriter, c: &[f64; 36]) {
+    for &v in c {
+        w.f64(v);
+    }
+}
+
+fn read_covariance(r: &mut CdrReader<'_>) -> Result<[f64; 36], CdrError> {
+    let mut c = [0.0; 36];
+    for v in &mut c {
+        *v = r.f64()?;
+    }
+    Ok(c)
+}
+
+/// `geometry_msgs/PoseWithCovariance`: position, orientation and the 6×6
+/// row-major covariance of (x, y, z, roll, pitch, yaw).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseWithCovariance {
+    pub position: Vector3,
+    pub orientation: Quaternion,
+    pub covariance: [f64; 36],
+}
+
+impl Default for PoseWithCovariance {
+    fn default() -> Self {
+        PoseWithCovariance {
+            position: Vector3::default(),
+            orientation: Quaternion::default(),
+            covariance: [0.0; 36],
+        }
+    }
+}
+
+/// `geometry_msgs/TwistWithCovariance`: linear and angular velocity and
+/// their 6×6 covariance.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TwistWithCovariance {
+    pub linear: Vector3,
+    pub angular: Vector3,
+    pub covariance: [f64; 36],
+}
+
+impl Default for TwistWithCovariance {
+    fn default() -> Self {
+        TwistWithCovariance {
+            linear: Vector3::default(),
+            angular: Vector3::default(),
+            covariance: [0.0; 36],
+        }
+    }
+}
+
+/// `nav_msgs/Odometry`: the pose of `child_frame_id` in `header.frame_id`
+/// and its velocity in `child_frame_id`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Odometry {
+    pub header: Header,
+    pub child_frame_id: String,
+    pub pose: PoseWithCovariance,
+    pub twist: TwistWithCovariance,
+}
+
+impl RosMessage for Odometry {
+    const TYPE: &'static str = "nav_msgs/msg/Odometry";
+
+    fn write(&self, w: &mut CdrWriter) {
+        self.header.write(w);
+        w.string(&self.child_frame_id);
+        self.pose.position.write(w);
+        self.pose.orientation.write(w);
+        write_covariance(w, &self.pose.covariance);
+        self.twist.linear.write(w);
+        self.twist.angular.write(w);
+        write_covariance(w, &self.twist.covariance);
+    }
+
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        Ok(Odometry {
+            header: Header::read(r)?,
+            child_frame_id: r.string()?,
+            pose: PoseWithCovariance {
+                position: Vector3::read(r)?,
+                orientation: Quaternion::read(r)?,
+                covariance: read_covariance(r)?,
+            },
+            twist: TwistWithCovariance {
+                linear: Vector3::read(r)?,
+                angular: Vector3::read(r)?,
+                covariance: read_covariance(r)?,
+            },
+        })
+    }
+
+    fn definition() -> String {
+        schema(Self::TYPE)
+    }
+}
+
+/// `geometry_msgs/TransformStamped`: the pose of `child_frame_id` in
+/// `header.frame_id`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct TransformStamped {
+    pub header: Header,
+    pub child_frame_id: String,
+    pub translation: Vector3,
+    pub rotation: Quaternion,
+}
+
+/// `tf2_msgs/TFMessage`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct TfMessage {
+    pub transforms: Vec<TransformStamped>,
+}
+
+impl RosMessage for TfMessage {
+    const TYPE: &'static str = "tf2_msgs/msg/TFMessage";
+
+    fn write(&self, w: &mut CdrWriter) {
+        w.count(self.transforms.len());
+        for t in &self.transforms {
+            t.header.write(w);
+            w.string(&t.child_frame_id);
+            t.translation.write(w);
+            t.rotation.write(w);
+        }
+    }
+
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        // A transform is at least 4 + 4 + 4 + 4 + 7 × 8 bytes.
+        let n = r.count(72)?;
+        let transforms = (0..n)
+            .map(|_| {
+                Ok(TransformStamped {
+                    header: Header::read(r)?,
+                    child_frame_id: r.string()?,
+                    translation: Vector3::read(r)?,
+                    rotation: Quaternion::read(r)?,
+                })
+            })
+            .collect::<Result<_, CdrError>>()?;
+        Ok(TfMessage { transforms })
+    }
+
+    fn definition() -> String {
+        schema(Self::TYPE)
+    }
+}
+
+/// `std_msgs/UInt8MultiArray` with an empty layout: a run of bytes, such
+/// as the serial bytes of the LMS200 exactly as they came.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct ByteArray {
+    pub data: Vec<u8>,
+}
+
+impl RosMessage for ByteArray {
+    const TYPE: &'static str = "std_msgs/msg/UInt8MultiArray";
+
+    fn write(&self, w: &mut CdrWriter) {
+        w.count(0); // layout.dim
+        w.u32(0); // layout.data_offset
+        w.u8_seq(&self.data);
+    }
+
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        let dims = r.count(12)?;
+        for _ in 0..dims {
+            r.string()?;
+            r.u32()?;
+            r.u32()?;
+        }
+        r.u32()?;
+        Ok(ByteArray { data: r.u8_seq()? })
+    }
+
+    fn definition() -> String {
+        schema(Self::TYPE)
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests;
