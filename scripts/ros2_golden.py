@@ -108,6 +108,19 @@ tf = T["tf2_msgs/msg/TFMessage"](
 )
 cases.append(("tf_message", tf, "tf2_msgs/msg/TFMessage"))
 
+Pwcs = T["geometry_msgs/msg/PoseWithCovarianceStamped"]
+pose = Pwcs(
+    header=header(5, 250, "map"),
+    pose=Pwc(
+        pose=Pose(
+            position=Point(x=3.5, y=-0.125, z=0.0),
+            orientation=Quaternion(x=0.0, y=0.0, z=math.sin(-0.6), w=math.cos(-0.6)),
+        ),
+        covariance=f64([0.5 - 0.01 * i for i in range(36)]),
+    ),
+)
+cases.append(("pose_with_covariance_stamped", pose, "geometry_msgs/msg/PoseWithCovarianceStamped"))
+
 Layout = T["std_msgs/msg/MultiArrayLayout"]
 raw = T["std_msgs/msg/UInt8MultiArray"](
     layout=Layout(dim=[], data_offset=0), data=u8([0x02, 0x80, 0xD6, 0x02, 0xB0])

@@ -9,7 +9,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, bail};
 use clsmap::input::bag::laser_scan;
-use clsmap::input::lms200::{note_mode, range_scan, scan_time_us, seconds};
+use clsmap::input::lms200::{
+    lms200_reach, lms200_scan_timing, note_mode, range_scan, scan_time_us, seconds,
+};
 use clsmap::ros2::bag::{BagTopic, BagWriter, Durability};
 use clsmap::ros2::{ByteArray, LaserScan};
 use lms200::driver::SerialDriver;
@@ -189,18 +191,9 @@ impl RecordBag {
                 .as_secs_f64();
             let t = self.clock_offset + since - before;
             if let Some(rs) = range_scan(&ts.scan, t, self.mode) {
-                let reach = match ts.units {
-                    Units::Mm => 8.183,
-                    Units::Cm => 81.83,
-                };
-                // The mirror turns at 75 Hz; a 0.5° or 0.25° scan
-                // interlaces 2 or 4 turns (the beams' order in time is
-                // then not their order in angle; the increment is that
-                // of one turn).
-                let turn = 1.0 / 75.0;
-                let turns = (1f64.to_radians() / rs.angle_increment).round().max(1.0);
-                let time_increment = turn * rs.angle_increment / std::f64::consts::TAU;
-                let msg = laser_scan(&rs, "laser", reach, time_increment, turn * turns);
+                let (time_increment, scan_time) = lms200_scan_timing(rs.angle_increment);
+                let reach = lms200_reach(ts.units);
+                let msg = laser_scan(&rs, "laser", reach, time_increment, scan_time);
                 self.writer.write(&mut self.scan, (t * 1e9) as u64, &msg)?;
             }
         }

@@ -326,6 +326,10 @@ pub struct LoopConfig {
     /// robot's boot. The daemon then goes on waiting for the sensor and
     /// says so in STATUS=.
     pub ready_after: f64,
+    /// Write a rosbag2 MCAP bag of the run, `run.mcap` in the run's
+    /// directory: /scan, /pose, /odom, /tf and /tf_static, as ROS 2 tools
+    /// (Foxglove, `ros2 bag play`, RViz) read them (default false).
+    pub bag: bool,
 }
 
 impl Default for LoopConfig {
@@ -336,6 +340,7 @@ impl Default for LoopConfig {
             status_interval: 10.0,
             max_run_time: 0.0,
             ready_after: 10.0,
+            bag: false,
         }
     }
 }

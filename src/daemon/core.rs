@@ -121,6 +121,8 @@ pub struct Core {
     paused: bool,
     view_due: Option<LiveView>,
     map_view_due: Option<MapView>,
+    /// The scans, poses and transforms for ROS 2 (a bag), when asked for.
+    ros2: Option<super::ros2_out::Ros2Outbox>,
     /// What the last map snapshot was taken of, its version, and when.
     map_key: Option<MapKey>,
     map_version: u64,
@@ -194,6 +196,7 @@ impl Core {
             paused: false,
             view_due: None,
             map_view_due: None,
+            ros2: None,
             map_key: None,
             map_version: 0,
             last_map_view: f64::NEG_INFINITY,
@@ -247,7 +250,13 @@ impl Core {
     ) -> Option<ScanOutcome> {
         self.poll_base(now);
         let scan = range_scan(scan, t, self.mode)?;
+        let for_ros2 = self.ros2.is_some().then(|| scan.clone());
         let outcome = self.live.on_scan(scan, queued);
+        if let (Some(out), Some(scan)) = (self.ros2.as_mut(), for_ros2) {
+            let odometry = self.live.odometry_at(t);
+            let cov = self.live.mapper().last_covariance();
+            out.scan(&scan, outcome.pose, &cov, odometry);
+        }
         if self.first_scan_after.is_none() {
             self.first_scan_after = Some(now);
         }
@@ -413,6 +422,28 @@ impl Core {
             map_version: self.map_version,
             status,
         });
+    }
+
+    /// From now on, every scan gives the messages ROS 2 tools expect of
+    /// it (the scan, the pose, the odometry, the transforms), for a shell
+    /// to take with [`poll_ros2`](Self::poll_ros2). `epoch`: the wall
+    /// clock (s since the Unix epoch) at this core's clock's zero.
+    pub fn enable_ros2(&mut self, epoch: f64) {
+        let units = match self.config.sensor.units.as_str() {
+            "cm" => lms200::Units::Cm,
+            _ => lms200::Units::Mm,
+        };
+        self.ros2 = Some(super::ros2_out::Ros2Outbox::new(
+            epoch,
+            self.config.mapper.laser_mount,
+            crate::input::lms200::lms200_reach(units),
+        ));
+    }
+
+    /// The ROS 2 messages of the scans since the last call (none unless
+    /// [`enable_ros2`](Self::enable_ros2) was called).
+    pub fn poll_ros2(&mut self) -> Vec<super::ros2_out::Stamped> {
+        self.ros2.as_mut().map(|o| o.take()).unwrap_or_default()
     }
 
     /// A snapshot of the loop for the live view's panel.

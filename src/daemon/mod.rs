@@ -14,6 +14,7 @@
 //! - [`simulation`]: the simulated robot and [`VirtualRobot`](simulation::VirtualRobot): the same core on a virtual clock, faster than real
 //!   time, for tests and soak runs.
 
+pub mod bag_sink;
 pub mod base_driver;
 pub mod checkpoint;
 pub mod config;
@@ -21,6 +22,7 @@ pub mod core;
 pub mod latency;
 pub mod live;
 pub mod notify;
+pub mod ros2_out;
 pub mod run_dir;
 pub mod runtime;
 pub mod sensor;

@@ -23,6 +23,7 @@ use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 use tracing::{error, info, warn};
 
+use super::bag_sink::{BAG_FILE, BagSink};
 use super::base_driver::{BaseConnector, BaseDriver};
 use super::checkpoint::CheckpointFailed;
 use super::config::{BaseKind, DaemonConfig};
@@ -398,7 +399,17 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
         config.sensor.retry_initial,
         config.sensor.retry_max,
     );
+    let write_bag = config.daemon.bag;
     let mut core = Core::new(config, live, base);
+    if write_bag {
+        let wall_now = lms200::driver::unix_micros() as f64 / 1e6;
+        core.enable_ros2(wall_now - t0.elapsed().as_secs_f64());
+    }
+    // Started at the first scan, in the run's directory (a run that never
+    // saw a scan leaves none behind); a bag that cannot be written is given
+    // up with an error, the run goes on.
+    let mut bag: Option<BagSink> = None;
+    let mut bag_failed = false;
     let mut last_seq = 0;
     let mut writing: Option<JoinHandle<Result<(), CheckpointFailed>>> = None;
     let mut optimising: Option<JoinHandle<OptimisationResult>> = None;
@@ -428,6 +439,28 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
                     let t = slot.scan.timestamp.saturating_duration_since(t0).as_secs_f64();
                     let queued = slot.scan.received_at.elapsed();
                     let outcome = core.handle_scan(now, t, &slot.scan.scan, Some(queued));
+                    let messages = core.poll_ros2();
+                    if !messages.is_empty() && !bag_failed {
+                        if bag.is_none() {
+                            let started = dirs
+                                .out_dir()
+                                .map_err(|e| e.to_string())
+                                .and_then(|d| {
+                                    BagSink::start(&d.join(BAG_FILE))
+                                        .map_err(|e| crate::error_chain(&e))
+                                });
+                            match started {
+                                Ok(sink) => bag = Some(sink),
+                                Err(e) => {
+                                    error!("no bag of this run: {e}");
+                                    bag_failed = true;
+                                }
+                            }
+                        }
+                        if let Some(sink) = bag.as_mut() {
+                            sink.send(messages);
+                        }
+                    }
                     if let (Some(outcome), Some(hook)) = (outcome, on_scan.as_mut()) {
                         hook(&ScanProgress {
                             t: now,
@@ -512,6 +545,13 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     // taken in before the last save.
     core.finish();
     let saved = dirs.save(&mut core);
+    if let Some(sink) = bag.take() {
+        match tokio::task::spawn_blocking(move || sink.finish()).await {
+            Ok(Ok((path, n))) => info!(path = %path.display(), messages = n, "bag written"),
+            Ok(Err(e)) => error!("the bag is incomplete: {}", crate::error_chain(&e)),
+            Err(_) => error!("the bag writer did not finish"),
+        }
+    }
     let joined = tokio::task::spawn_blocking(move || sensor.stop()).await;
     if joined.is_err() {
         warn!("the sensor thread did not stop cleanly");

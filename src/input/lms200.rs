@@ -61,6 +61,27 @@ pub fn range_scan(scan: &Scan, t: f64, mode: MeasuringMode) -> Option<RangeScan>
     })
 }
 
+/// The LMS200's reach (m) in `units`: the largest distance its 13-bit
+/// values carry.
+pub fn lms200_reach(units: Units) -> f64 {
+    match units {
+        Units::Mm => 8.183,
+        Units::Cm => 81.83,
+    }
+}
+
+/// A scan's `time_increment` and `scan_time` (s) as a LaserScan gives them,
+/// for beams `angle_increment` (rad) apart: the mirror turns at 75 Hz, and
+/// a 0.5° or 0.25° scan interlaces 2 or 4 turns (the beams' order in time
+/// is then not their order in angle; the increment is that of one turn).
+pub fn lms200_scan_timing(angle_increment: f64) -> (f64, f64) {
+    let turn = 1.0 / 75.0;
+    let turns = (1f64.to_radians() / angle_increment)
+        .round()
+        .clamp(1.0, 4.0);
+    (turn * angle_increment / std::f64::consts::TAU, turn * turns)
+}
+
 /// Mid-sweep time (µs) of a complete scan whose telegram ended at `t_end_us`
 /// (µs) on a line at `baud`: the model of [`lms200::link::timing`]. A
 /// partial scan keeps `t_end_us`. Integer microseconds, like the

@@ -78,6 +78,10 @@ const FIELDS: &[(&str, &str)] = &[
         "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform\n",
     ),
     (
+        "geometry_msgs/PoseWithCovarianceStamped",
+        "std_msgs/Header header\ngeometry_msgs/PoseWithCovariance pose\n",
+    ),
+    (
         "tf2_msgs/TFMessage",
         "geometry_msgs/TransformStamped[] transforms\n",
     ),
@@ -413,6 +417,40 @@ impl RosMessage for Odometry {
             twist: TwistWithCovariance {
                 linear: Vector3::read(r)?,
                 angular: Vector3::read(r)?,
+                covariance: read_covariance(r)?,
+            },
+        })
+    }
+
+    fn definition() -> String {
+        schema(Self::TYPE)
+    }
+}
+
+/// `geometry_msgs/PoseWithCovarianceStamped`: a pose estimate in
+/// `header.frame_id` with its covariance.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct PoseWithCovarianceStamped {
+    pub header: Header,
+    pub pose: PoseWithCovariance,
+}
+
+impl RosMessage for PoseWithCovarianceStamped {
+    const TYPE: &'static str = "geometry_msgs/msg/PoseWithCovarianceStamped";
+
+    fn write(&self, w: &mut CdrWriter) {
+        self.header.write(w);
+        self.pose.position.write(w);
+        self.pose.orientation.write(w);
+        write_covariance(w, &self.pose.covariance);
+    }
+
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        Ok(PoseWithCovarianceStamped {
+            header: Header::read(r)?,
+            pose: PoseWithCovariance {
+                position: Vector3::read(r)?,
+                orientation: Quaternion::read(r)?,
                 covariance: read_covariance(r)?,
             },
         })

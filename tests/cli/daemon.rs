@@ -337,3 +337,113 @@ fn a_planted_link_never_redirects_a_map_write() {
     clsmap::map::file::load(&out.join("map.json")).unwrap();
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `clsmap run` with `[daemon] bag = true` on the demo, stopped by
+/// SIGTERM; returns the run's directory.
+fn run_with_a_bag(dir: &TempDir) -> PathBuf {
+    let config = demo_run_config(dir, "");
+    let text = std::fs::read_to_string(&config).unwrap();
+    std::fs::write(
+        &config,
+        text.replacen("[daemon]", "[daemon]\nbag = true", 1),
+    )
+    .unwrap();
+    let mut daemon = Daemon::start(&config);
+    daemon.wait_for("writing a rosbag2 bag", Duration::from_secs(60));
+    daemon.wait_for("exploration: goal reached", Duration::from_secs(60));
+    daemon.signal("TERM");
+    let (status, _, stderr) = daemon.finish(Duration::from_secs(30));
+    assert!(status.success(), "{status}\n{stderr}");
+    assert!(stderr.contains("bag written"), "{stderr}");
+    run_dir(&dir.join("state"))
+}
+
+/// The daemon's bag holds, for every scan, the scan, the pose estimate,
+/// the odometry and the transforms map → odom → base_link that chain to
+/// the pose, and base_link → laser once; the poses are those of
+/// trajectory.tum.
+#[test]
+fn run_writes_a_rosbag2_bag_whose_transforms_chain_to_its_poses() {
+    use clsmap::ros2::bag::BagReader;
+    use clsmap::ros2::{PoseWithCovarianceStamped, RosMessage, TfMessage};
+    let dir = TempDir::new("run-bag");
+    let run = run_with_a_bag(&dir);
+    let (mut poses, mut tfs, mut counts) =
+        (Vec::new(), Vec::new(), std::collections::BTreeMap::new());
+    for m in BagReader::open(&run.join("run.mcap")).unwrap() {
+        let m = m.unwrap();
+        *counts.entry(m.topic.topic.clone()).or_insert(0usize) += 1;
+        match m.topic.topic.as_str() {
+            "/pose" => poses.push(PoseWithCovarianceStamped::from_cdr(&m.data).unwrap()),
+            "/tf" => tfs.push(TfMessage::from_cdr(&m.data).unwrap()),
+            _ => {}
+        }
+    }
+    let scans = counts["/scan"];
+    assert!(scans > 20, "{counts:?}");
+    assert_eq!(counts["/tf_static"], 1, "{counts:?}");
+    for topic in ["/pose", "/tf", "/odom"] {
+        assert_eq!(counts[topic], scans, "{topic}: {counts:?}");
+    }
+    let as_xy = |t: &clsmap::ros2::TransformStamped| {
+        clsmap::geometry::Pose2::new(t.translation.x, t.translation.y, t.rotation.yaw())
+    };
+    for (p, tf) in poses.iter().zip(&tfs) {
+        assert_eq!(
+            (
+                tf.transforms[0].header.frame_id.as_str(),
+                tf.transforms[1].child_frame_id.as_str()
+            ),
+            ("map", "base_link")
+        );
+        let chained = as_xy(&tf.transforms[0]).compose(&as_xy(&tf.transforms[1]));
+        let pose = &p.pose.position;
+        assert!(
+            (chained.x - pose.x).hypot(chained.y - pose.y) < 1e-6,
+            "{chained:?} {p:?}"
+        );
+    }
+    // The trajectory file holds the same poses (the last ones it wrote).
+    let tum = std::fs::read_to_string(run.join("trajectory.tum")).unwrap();
+    let written = tum.lines().filter(|l| !l.starts_with('#')).count();
+    assert!(
+        written + 5 >= scans && written <= scans + 5,
+        "{written} poses, {scans} scans"
+    );
+}
+
+/// An independent reader (PyPI `rosbags`) decodes every message of the
+/// daemon's bag.
+#[test]
+#[ignore = "needs PyPI rosbags; CI runs it: cargo test --test cli -- --ignored"]
+fn an_independent_reader_decodes_every_message_of_the_daemon_s_bag() {
+    let dir = TempDir::new("run-bag-rosbags");
+    let run = run_with_a_bag(&dir);
+    let python = std::env::var("CLSMAP_PYTHON").unwrap_or_else(|_| "python3".into());
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/ros2_bag_check.py");
+    let out = Command::new(&python)
+        .arg(&script)
+        .arg(run.join("run.mcap"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{python}: {}\n(needs PyPI rosbags: set CLSMAP_PYTHON to a Python that has it)",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for (topic, ty) in [
+        ("/scan", "sensor_msgs/msg/LaserScan"),
+        ("/pose", "geometry_msgs/msg/PoseWithCovarianceStamped"),
+        ("/odom", "nav_msgs/msg/Odometry"),
+        ("/tf", "tf2_msgs/msg/TFMessage"),
+        ("/tf_static", "tf2_msgs/msg/TFMessage"),
+    ] {
+        assert_eq!(report["topics"][topic]["type"], ty, "{report}");
+        assert!(
+            report["topics"][topic]["count"].as_u64().unwrap() >= 1,
+            "{report}"
+        );
+    }
+    assert_eq!(report["scan_stamps_increase"], true, "{report}");
+}

@@ -98,6 +98,25 @@ fn tf_message() -> TfMessage {
     }
 }
 
+fn pose_with_covariance_stamped() -> PoseWithCovarianceStamped {
+    let mut covariance = [0.0; 36];
+    for (i, c) in covariance.iter_mut().enumerate() {
+        *c = 0.5 - 0.01 * i as f64;
+    }
+    PoseWithCovarianceStamped {
+        header: header(5, 250, "map"),
+        pose: PoseWithCovariance {
+            position: Vector3 {
+                x: 3.5,
+                y: -0.125,
+                z: 0.0,
+            },
+            orientation: Quaternion::from_yaw(-1.2),
+            covariance,
+        },
+    }
+}
+
 fn byte_array() -> ByteArray {
     ByteArray {
         data: vec![0x02, 0x80, 0xD6, 0x02, 0xB0],
@@ -110,6 +129,10 @@ fn messages_match_the_independent_serializer() {
     assert_eq!(odometry().to_cdr(), golden("odometry"));
     assert_eq!(tf_message().to_cdr(), golden("tf_message"));
     assert_eq!(byte_array().to_cdr(), golden("byte_array"));
+    assert_eq!(
+        pose_with_covariance_stamped().to_cdr(),
+        golden("pose_with_covariance_stamped")
+    );
 }
 
 #[test]

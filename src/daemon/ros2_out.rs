@@ -1,0 +1,311 @@
+//! What the daemon tells ROS 2 about each scan, as messages: the scan, the
+//! pose estimate with its covariance, the odometry, and the transforms of
+//! REP 105 (`map` → `odom` from the localizer, `odom` → `base_link` from the
+//! base's odometry, `base_link` → `laser` from the mounting, once, static).
+//!
+//! Sans-IO, like the core it belongs to: [`Ros2Outbox`] turns a scan and
+//! its pose into stamped messages; a shell writes them into a bag (or, later,
+//! onto DDS). Times are the daemon's clock (s since its start) plus the wall
+//! clock at that start, so stamps are ROS times (ns since the epoch).
+
+use std::collections::VecDeque;
+
+use crate::geometry::{Pose2, RangeScan};
+use crate::input::bag::laser_scan;
+use crate::input::lms200::lms200_scan_timing;
+use crate::ros2::msg::{PoseWithCovariance, TransformStamped, TwistWithCovariance};
+use crate::ros2::{
+    Header, LaserScan, Odometry, PoseWithCovarianceStamped, Quaternion, TfMessage, Time, Vector3,
+};
+
+/// REP 105 frame names.
+pub const MAP_FRAME: &str = "map";
+pub const ODOM_FRAME: &str = "odom";
+pub const BASE_FRAME: &str = "base_link";
+pub const LASER_FRAME: &str = "laser";
+
+/// Messages held for the shell at most; older ones are dropped (and
+/// counted) if it does not take them, so the loop's memory stays bounded.
+const MAX_QUEUED: usize = 256;
+
+/// One message for a topic.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Ros2Message {
+    /// `/scan`.
+    Scan(LaserScan),
+    /// `/pose`: the localizer's estimate in `map` (boxed, as the
+    /// odometry: its covariance makes it large).
+    Pose(Box<PoseWithCovarianceStamped>),
+    /// `/odom`: the base's odometry (boxed: its two covariances make it
+    /// the largest by far).
+    Odometry(Box<Odometry>),
+    /// `/tf`.
+    Tf(TfMessage),
+    /// `/tf_static` (transient-local: a late subscriber still gets it).
+    TfStatic(TfMessage),
+}
+
+impl Ros2Message {
+    /// The topic it goes on.
+    pub fn topic(&self) -> &'static str {
+        match self {
+            Ros2Message::Scan(_) => "/scan",
+            Ros2Message::Pose(_) => "/pose",
+            Ros2Message::Odometry(_) => "/odom",
+            Ros2Message::Tf(_) => "/tf",
+            Ros2Message::TfStatic(_) => "/tf_static",
+        }
+    }
+}
+
+/// A message and when it was produced (ns since the epoch).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stamped {
+    pub stamp_ns: u64,
+    pub message: Ros2Message,
+}
+
+/// Builds the messages of each scan; see the module documentation.
+#[derive(Debug)]
+pub struct Ros2Outbox {
+    /// Wall-clock time (s since the epoch) at the daemon's clock's zero.
+    epoch: f64,
+    mount: Pose2,
+    /// The sensor's reach (m), the scans' `range_max`.
+    reach: f64,
+    queue: VecDeque<Stamped>,
+    static_sent: bool,
+    dropped: u64,
+}
+
+/// A pose as a ROS transform of `child` in `parent` at `stamp`.
+fn transform(stamp: Time, parent: &str, child: &str, p: &Pose2) -> TransformStamped {
+    TransformStamped {
+        header: Header {
+            stamp,
+            frame_id: parent.into(),
+        },
+        child_frame_id: child.into(),
+        translation: Vector3 {
+            x: p.x,
+            y: p.y,
+            z: 0.0,
+        },
+        rotation: Quaternion::from_yaw(p.theta),
+    }
+}
+
+/// The 6×6 covariance (x, y, z, roll, pitch, yaw) of a planar one (x, y,
+/// θ); z, roll and pitch are not estimated and carry a large variance, as
+/// ROS tools expect of a 2D estimate.
+fn covariance_6(cov: &[[f64; 3]; 3]) -> [f64; 36] {
+    let mut c = [0.0; 36];
+    let index = [0usize, 1, 5];
+    for (i, &a) in index.iter().enumerate() {
+        for (j, &b) in index.iter().enumerate() {
+            c[a * 6 + b] = cov[i][j];
+        }
+    }
+    for k in [2usize, 3, 4] {
+        c[k * 6 + k] = 1e6;
+    }
+    c
+}
+
+impl Ros2Outbox {
+    /// `epoch`: the wall clock (s since the epoch) at the daemon's zero;
+    /// `mount`: the laser in the base frame; `reach`: the sensor's range
+    /// limit (m).
+    pub fn new(epoch: f64, mount: Pose2, reach: f64) -> Self {
+        Ros2Outbox {
+            epoch,
+            mount,
+            reach,
+            queue: VecDeque::new(),
+            static_sent: false,
+            dropped: 0,
+        }
+    }
+
+    fn push(&mut self, t: f64, message: Ros2Message) {
+        if self.queue.len() >= MAX_QUEUED {
+            self.queue.pop_front();
+            self.dropped += 1;
+        }
+        let stamp_ns = ((self.epoch + t) * 1e9).max(0.0) as u64;
+        self.queue.push_back(Stamped { stamp_ns, message });
+    }
+
+    /// The messages of one scan (`scan.t` on the daemon's clock), located
+    /// at `pose` (map frame) with covariance `cov` (x, y, θ), with the
+    /// odometry pose then (`None` without a base).
+    pub fn scan(
+        &mut self,
+        scan: &RangeScan,
+        pose: Pose2,
+        cov: &[[f64; 3]; 3],
+        odometry: Option<Pose2>,
+    ) {
+        let t = scan.t;
+        let stamp = Time::from_secs(self.epoch + t).unwrap_or_default();
+        if !self.static_sent {
+            self.static_sent = true;
+            let tf = transform(stamp, BASE_FRAME, LASER_FRAME, &self.mount);
+            self.push(
+                t,
+                Ros2Message::TfStatic(TfMessage {
+                    transforms: vec![tf],
+                }),
+            );
+        }
+        let (time_increment, scan_time) = lms200_scan_timing(scan.angle_increment);
+        // Stamped on the wall clock: the scan's time moved by the epoch.
+        let wall = RangeScan {
+            t: self.epoch + t,
+            ..scan.clone()
+        };
+        let msg = laser_scan(&wall, LASER_FRAME, self.reach, time_increment, scan_time);
+        self.push(t, Ros2Message::Scan(msg));
+        let header = |frame: &str| Header {
+            stamp,
+            frame_id: frame.into(),
+        };
+        self.push(
+            t,
+            Ros2Message::Pose(Box::new(PoseWithCovarianceStamped {
+                header: header(MAP_FRAME),
+                pose: PoseWithCovariance {
+                    position: Vector3 {
+                        x: pose.x,
+                        y: pose.y,
+                        z: 0.0,
+                    },
+                    orientation: Quaternion::from_yaw(pose.theta),
+                    covariance: covariance_6(cov),
+                },
+            })),
+        );
+        // map → odom so that map → odom → base_link is the pose; without
+        // odometry, odom is base_link.
+        let odom = odometry.unwrap_or(Pose2::IDENTITY);
+        let map_to_odom = pose.compose(&odom.inverse());
+        let transforms = vec![
+            transform(stamp, MAP_FRAME, ODOM_FRAME, &map_to_odom),
+            transform(stamp, ODOM_FRAME, BASE_FRAME, &odom),
+        ];
+        self.push(t, Ros2Message::Tf(TfMessage { transforms }));
+        if let Some(o) = odometry {
+            self.push(
+                t,
+                Ros2Message::Odometry(Box::new(Odometry {
+                    header: header(ODOM_FRAME),
+                    child_frame_id: BASE_FRAME.into(),
+                    pose: PoseWithCovariance {
+                        position: Vector3 {
+                            x: o.x,
+                            y: o.y,
+                            z: 0.0,
+                        },
+                        orientation: Quaternion::from_yaw(o.theta),
+                        covariance: [0.0; 36],
+                    },
+                    twist: TwistWithCovariance::default(),
+                })),
+            );
+        }
+    }
+
+    /// The messages built since the last call, oldest first.
+    pub fn take(&mut self) -> Vec<Stamped> {
+        self.queue.drain(..).collect()
+    }
+
+    /// Messages dropped because the shell did not take them in time.
+    pub fn dropped(&self) -> u64 {
+        self.dropped
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::geometry::BeamFault;
+
+    fn scan(t: f64) -> RangeScan {
+        RangeScan {
+            t,
+            angle_min: -std::f64::consts::FRAC_PI_2,
+            angle_increment: 0.5f64.to_radians(),
+            ranges: (0..361)
+                .map(|i| {
+                    if i == 7 {
+                        Err(BeamFault::NoReturn)
+                    } else {
+                        Ok(2.0)
+                    }
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn the_transforms_chain_to_the_pose() {
+        let mut out = Ros2Outbox::new(1_700_000_000.0, Pose2::new(0.2, 0.0, 0.0), 8.183);
+        let pose = Pose2::new(3.0, -1.0, 0.7);
+        let odom = Pose2::new(10.0, 4.0, -2.0);
+        let cov = [[0.01, 0.0, 0.0], [0.0, 0.02, 0.0], [0.0, 0.0, 0.003]];
+        out.scan(&scan(5.0), pose, &cov, Some(odom));
+        out.scan(&scan(5.1), pose, &cov, None);
+        let all = out.take();
+        let topics: Vec<&str> = all.iter().map(|m| m.message.topic()).collect();
+        assert_eq!(
+            topics,
+            [
+                "/tf_static",
+                "/scan",
+                "/pose",
+                "/tf",
+                "/odom",
+                "/scan",
+                "/pose",
+                "/tf"
+            ]
+        );
+        let Ros2Message::Tf(tf) = &all[3].message else {
+            panic!()
+        };
+        let as_pose =
+            |t: &TransformStamped| Pose2::new(t.translation.x, t.translation.y, t.rotation.yaw());
+        assert_eq!(tf.transforms[0].header.frame_id, "map");
+        assert_eq!(tf.transforms[0].child_frame_id, "odom");
+        assert_eq!(tf.transforms[1].child_frame_id, "base_link");
+        let chained = as_pose(&tf.transforms[0]).compose(&as_pose(&tf.transforms[1]));
+        assert!((chained.x - pose.x).abs() < 1e-9 && (chained.y - pose.y).abs() < 1e-9);
+        assert!((chained.theta - pose.theta).abs() < 1e-9);
+        let Ros2Message::Pose(p) = &all[2].message else {
+            panic!()
+        };
+        assert_eq!(p.pose.covariance[0], 0.01);
+        assert_eq!(p.pose.covariance[35], 0.003);
+        let Ros2Message::Scan(s) = &all[1].message else {
+            panic!()
+        };
+        assert!(s.ranges[7].is_infinite() && s.ranges[0] == 2.0);
+        assert_eq!(s.header.frame_id, "laser");
+        // The scan's stamp is its first beam's: before the pose's.
+        assert!(s.header.stamp.as_nanos() < p.header.stamp.as_nanos());
+        assert!(all[1].stamp_ns.abs_diff(1_700_000_005_000_000_000) < 1000);
+        assert!(out.take().is_empty());
+    }
+
+    #[test]
+    fn a_shell_that_does_not_take_its_messages_bounds_them() {
+        let mut out = Ros2Outbox::new(0.0, Pose2::IDENTITY, 8.183);
+        for k in 0..200 {
+            out.scan(&scan(f64::from(k)), Pose2::IDENTITY, &[[0.0; 3]; 3], None);
+        }
+        assert_eq!(out.take().len(), MAX_QUEUED);
+        assert!(out.dropped() > 0);
+    }
+}
