@@ -25,6 +25,7 @@ pub fn demo(
     world: Option<&str>,
     seed: Option<u64>,
     web: bool,
+    ros2: bool,
 ) -> anyhow::Result<ExitCode> {
     let out = out.map_or_else(default_out, Path::to_path_buf);
     let out = out.as_path();
@@ -36,6 +37,22 @@ pub fn demo(
         config.sim.seed = s;
     }
     config.web.enabled = web;
+    if ros2 {
+        if !cfg!(feature = "dds") {
+            bail!("--ros2: this clsmap was built without its ROS 2 node (cargo feature `dds`)");
+        }
+        config.ros2.enabled = true;
+        if let Some(id) = std::env::var("ROS_DOMAIN_ID")
+            .ok()
+            .filter(|v| !v.is_empty())
+        {
+            config.ros2.domain_id = id
+                .parse()
+                .ok()
+                .filter(|d| *d <= 232)
+                .with_context(|| format!("ROS_DOMAIN_ID={id} is not a domain (0-232)"))?;
+        }
+    }
     if out.join(clsmap::pipeline::MAP_FILE).exists() {
         bail!(
             "{} already holds a map; choose another --out (the demo never overwrites a map)",

@@ -58,6 +58,11 @@ enum Command {
         /// 127.0.0.1:8080, or a free port when that one is taken).
         #[arg(long)]
         no_web: bool,
+        /// Publish the demo as a ROS 2 node on DDS (domain 0, or
+        /// ROS_DOMAIN_ID): /scan, /pose, /odom, /tf and /tf_static, for
+        /// RViz or Foxglove on this machine or the network.
+        #[arg(long)]
+        ros2: bool,
     },
     /// The robot daemon: the LMS200, the base, localization, the CLS map
     /// and exploration in one real-time loop (systemd `Type=notify`).
@@ -357,7 +362,8 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             world,
             seed,
             no_web,
-        } => demo::demo(out.as_deref(), world.as_deref(), seed, !no_web),
+            ros2,
+        } => demo::demo(out.as_deref(), world.as_deref(), seed, !no_web, ros2),
         Command::Run { config, map, mode } => daemon::run_daemon(&config, map, mode),
         Command::Probe { port } => sensor::probe(&port),
         Command::Record {

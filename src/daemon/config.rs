@@ -28,7 +28,37 @@ pub struct DaemonConfig {
     pub daemon: LoopConfig,
     pub map: MapSection,
     pub web: WebSection,
+    pub ros2: Ros2Section,
     pub mapper: MapperConfig,
+}
+
+/// `[ros2]`: a ROS 2 node on DDS (pure Rust, no ROS installation) that
+/// publishes what the daemon's bag holds: /scan, /pose, /odom, /tf and
+/// /tf_static (frames `map`, `odom`, `base_link`, `laser`, REP 105).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Ros2Section {
+    /// Publish (default false on a robot: DDS discovery goes to every
+    /// network the robot is on).
+    pub enabled: bool,
+    /// DDS domain, as `ROS_DOMAIN_ID` (0–232; default 0).
+    pub domain_id: u16,
+    /// Namespace of the node and its topics (default "": `/scan`, …;
+    /// "/robot1" gives `/robot1/scan`, …).
+    pub namespace: String,
+    /// The node's name (default "clsmap").
+    pub node_name: String,
+}
+
+impl Default for Ros2Section {
+    fn default() -> Self {
+        Ros2Section {
+            enabled: false,
+            domain_id: 0,
+            namespace: String::new(),
+            node_name: "clsmap".into(),
+        }
+    }
 }
 
 /// `[web]`: the live view in a browser, served by the daemon.
@@ -587,6 +617,43 @@ impl DaemonConfig {
         within("daemon.status_interval", d.status_interval, 0.1, 86_400.0)?;
         within("daemon.max_run_time", d.max_run_time, 0.0, 1e9)?;
         within("daemon.ready_after", d.ready_after, 0.0, 600.0)?;
+        let r = &self.ros2;
+        within("ros2.domain_id", f64::from(r.domain_id), 0.0, 232.0)?;
+        if r.enabled && !cfg!(feature = "dds") {
+            return Err(DaemonConfigError::Invalid {
+                key: "ros2.enabled".into(),
+                line: locate("ros2.enabled"),
+                reason: "this build has no ROS 2 node (built without the `dds` feature)".into(),
+            });
+        }
+        let name_ok = |s: &str, allow_slash: bool| {
+            s.chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || (allow_slash && c == '/'))
+        };
+        let ns_ok = r.namespace.is_empty()
+            || (r.namespace.starts_with('/')
+                && name_ok(&r.namespace, true)
+                && !r.namespace.ends_with('/'));
+        if !ns_ok {
+            return Err(DaemonConfigError::Invalid {
+                key: "ros2.namespace".into(),
+                line: locate("ros2.namespace"),
+                reason: format!(
+                    "{:?} is not a ROS 2 namespace (\"\" or /letters_digits/…)",
+                    r.namespace
+                ),
+            });
+        }
+        if r.node_name.is_empty()
+            || !name_ok(&r.node_name, false)
+            || r.node_name.starts_with(|c: char| c.is_ascii_digit())
+        {
+            return Err(DaemonConfigError::Invalid {
+                key: "ros2.node_name".into(),
+                line: locate("ros2.node_name"),
+                reason: format!("{:?} is not a ROS 2 node name", r.node_name),
+            });
+        }
         self.mapper.validate().map_err(|e| {
             let key = match &e {
                 crate::pipeline::config::ConfigError::Range { key, .. } => mapper_key(key),
@@ -747,6 +814,30 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("base.baud (line 2)"), "{e}");
+    }
+
+    #[test]
+    fn a_ros2_section_that_cannot_work_is_refused_with_its_line() {
+        let c = DaemonConfig::from_toml(
+            "[ros2]\nenabled = true\ndomain_id = 7\nnamespace = \"/robot_1\"\n",
+        );
+        assert_eq!(c.unwrap().ros2.namespace, "/robot_1");
+        for (text, key) in [
+            ("[ros2]\ndomain_id = 233\n", "ros2.domain_id (line 2)"),
+            (
+                "[ros2]\n\nnamespace = \"robot\"\n",
+                "ros2.namespace (line 3)",
+            ),
+            ("[ros2]\nnamespace = \"/a b\"\n", "ros2.namespace (line 2)"),
+            (
+                "[ros2]\nnode_name = \"9lives\"\n",
+                "ros2.node_name (line 2)",
+            ),
+        ] {
+            let e = DaemonConfig::from_toml(text).unwrap_err().to_string();
+            assert!(e.contains(key), "{text}: {e}");
+        }
+        assert!(DaemonConfig::from_toml("[ros2]\ndomain_id = 70000\n").is_err());
     }
 
     #[test]

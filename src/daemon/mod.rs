@@ -19,6 +19,8 @@ pub mod base_driver;
 pub mod checkpoint;
 pub mod config;
 pub mod core;
+#[cfg(feature = "dds")]
+pub mod dds_sink;
 pub mod latency;
 pub mod live;
 pub mod notify;

@@ -68,6 +68,9 @@ pub enum DaemonError {
     ReplayOdometry(String),
     #[error("cannot start the sensor thread")]
     Thread(#[source] std::io::Error),
+    #[cfg(feature = "dds")]
+    #[error(transparent)]
+    Ros2(#[from] super::dds_sink::DdsError),
     #[error("cannot start the async runtime")]
     Runtime(#[source] std::io::Error),
     #[error("the map could not be saved anywhere; tried {tried}")]
@@ -400,8 +403,15 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
         config.sensor.retry_max,
     );
     let write_bag = config.daemon.bag;
+    // The ROS 2 node before the loop starts: asked for, it must be there.
+    #[cfg(feature = "dds")]
+    let mut dds = match config.ros2.enabled {
+        true => Some(super::dds_sink::DdsSink::start(&config.ros2)?),
+        false => None,
+    };
+    let publish = write_bag || config.ros2.enabled;
     let mut core = Core::new(config, live, base);
-    if write_bag {
+    if publish {
         let wall_now = lms200::driver::unix_micros() as f64 / 1e6;
         core.enable_ros2(wall_now - t0.elapsed().as_secs_f64());
     }
@@ -440,7 +450,11 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
                     let queued = slot.scan.received_at.elapsed();
                     let outcome = core.handle_scan(now, t, &slot.scan.scan, Some(queued));
                     let messages = core.poll_ros2();
-                    if !messages.is_empty() && !bag_failed {
+                    #[cfg(feature = "dds")]
+                    if let Some(node) = dds.as_mut() {
+                        node.send(&messages);
+                    }
+                    if write_bag && !messages.is_empty() && !bag_failed {
                         if bag.is_none() {
                             let started = dirs
                                 .out_dir()
@@ -545,6 +559,10 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     // taken in before the last save.
     core.finish();
     let saved = dirs.save(&mut core);
+    #[cfg(feature = "dds")]
+    if let Some(node) = dds.take() {
+        let _ = tokio::task::spawn_blocking(move || node.finish()).await;
+    }
     if let Some(sink) = bag.take() {
         match tokio::task::spawn_blocking(move || sink.finish()).await {
             Ok(Ok((path, n))) => info!(path = %path.display(), messages = n, "bag written"),

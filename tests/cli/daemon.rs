@@ -447,3 +447,75 @@ fn an_independent_reader_decodes_every_message_of_the_daemon_s_bag() {
     }
     assert_eq!(report["scan_stamps_increase"], true, "{report}");
 }
+
+/// The daemon as a ROS 2 node, seen from an independent DDS stack (PyPI
+/// `cyclonedds`, `scripts/ros2_subscriber.py`, with the message layouts
+/// written there from the ROS 2 definitions): a subscriber that joins
+/// after the start gets /scan, /pose, /tf and, transient-local, the
+/// /tf_static sent at the first scan; frames as REP 105, stamps on the
+/// wall clock.
+#[test]
+#[ignore = "needs PyPI cyclonedds; CI runs it: cargo test --test cli -- --ignored"]
+fn an_independent_dds_subscriber_sees_the_daemon_s_topics() {
+    let dir = TempDir::new("run-ros2");
+    // A domain of its own, so tests side by side do not hear each other.
+    let domain = 100 + std::process::id() % 100;
+    let config = demo_run_config(
+        &dir,
+        &format!("[ros2]\nenabled = true\ndomain_id = {domain}\n"),
+    );
+    let mut daemon = Daemon::start(&config);
+    daemon.wait_for("ROS 2 node up", Duration::from_secs(60));
+    daemon.wait_for("first scan localized", Duration::from_secs(60));
+    let python = std::env::var("CLSMAP_PYTHON").unwrap_or_else(|_| "python3".into());
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/ros2_subscriber.py");
+    let out = Command::new(&python)
+        .arg(&script)
+        .args([
+            "--domain",
+            &domain.to_string(),
+            "--late",
+            "1",
+            "--timeout",
+            "60",
+        ])
+        .output()
+        .unwrap();
+    daemon.signal("TERM");
+    let (status, _, stderr) = daemon.finish(Duration::from_secs(30));
+    assert!(status.success(), "{status}\n{stderr}");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{python} {}: {stdout}\n{}\n(needs PyPI cyclonedds: set CLSMAP_PYTHON to a Python that has it)",
+        script.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    let scan = &report["scan"];
+    assert_eq!(scan["frame_id"], "laser", "{report}");
+    assert_eq!(scan["beams"], BEAMS, "{report}");
+    assert!((scan["angle_increment"].as_f64().unwrap() - 0.5f64.to_radians()).abs() < 1e-6);
+    assert!(
+        (scan["range_max"].as_f64().unwrap() - 8.183).abs() < 1e-5,
+        "{report}"
+    );
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs_f64();
+    assert!(
+        (now - scan["stamp"].as_f64().unwrap()).abs() < 120.0,
+        "{report}"
+    );
+    assert_eq!(report["pose"]["frame_id"], "map", "{report}");
+    assert!(report["pose"]["var_x"].as_f64().unwrap() > 0.0, "{report}");
+    assert_eq!(
+        report["tf"],
+        serde_json::json!([["map", "odom"], ["odom", "base_link"]])
+    );
+    assert_eq!(
+        report["tf_static"],
+        serde_json::json!([["base_link", "laser"]])
+    );
+}

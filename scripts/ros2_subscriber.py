@@ -1,0 +1,198 @@
+#!/usr/bin/env python3
+"""A ROS 2 subscriber on an independent DDS stack (PyPI `cyclonedds`, no
+ROS installation): subscribes to /scan, /pose, /tf and /tf_static as RViz
+would, with the ROS 2 type names and the message layouts written here from
+the ROS 2 definitions, waits (bounded) for samples on each, and prints one
+JSON report. /tf_static is read transient-local, so a subscriber that
+joins after it was sent still gets it.
+
+    python3 scripts/ros2_subscriber.py --domain 0 --timeout 60 [--namespace /robot1]
+
+Exits 1 if a topic saw nothing before the timeout.
+"""
+import argparse
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass
+
+from cyclonedds.core import Policy, Qos
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.idl import IdlStruct
+from cyclonedds.idl.types import array, float32, float64, int32, sequence, uint32
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+
+@dataclass
+class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
+    sec: int32
+    nanosec: uint32
+
+
+@dataclass
+class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
+    stamp: Time
+    frame_id: str
+
+
+@dataclass
+class LaserScan(IdlStruct, typename="sensor_msgs::msg::dds_::LaserScan_"):
+    header: Header
+    angle_min: float32
+    angle_max: float32
+    angle_increment: float32
+    time_increment: float32
+    scan_time: float32
+    range_min: float32
+    range_max: float32
+    ranges: sequence[float32]
+    intensities: sequence[float32]
+
+
+@dataclass
+class Point(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):
+    x: float64
+    y: float64
+    z: float64
+
+
+@dataclass
+class Vector3(IdlStruct, typename="geometry_msgs::msg::dds_::Vector3_"):
+    x: float64
+    y: float64
+    z: float64
+
+
+@dataclass
+class Quaternion(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
+    x: float64
+    y: float64
+    z: float64
+    w: float64
+
+
+@dataclass
+class Pose(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):
+    position: Point
+    orientation: Quaternion
+
+
+@dataclass
+class PoseWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovariance_"):
+    pose: Pose
+    covariance: array[float64, 36]
+
+
+@dataclass
+class PoseWithCovarianceStamped(
+    IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovarianceStamped_"
+):
+    header: Header
+    pose: PoseWithCovariance
+
+
+@dataclass
+class Transform(IdlStruct, typename="geometry_msgs::msg::dds_::Transform_"):
+    translation: Vector3
+    rotation: Quaternion
+
+
+@dataclass
+class TransformStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TransformStamped_"):
+    header: Header
+    child_frame_id: str
+    transform: Transform
+
+
+@dataclass
+class TFMessage(IdlStruct, typename="tf2_msgs::msg::dds_::TFMessage_"):
+    transforms: sequence[TransformStamped]
+
+
+def yaw(q):
+    return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--domain", type=int, default=0)
+    ap.add_argument("--namespace", default="")
+    ap.add_argument("--timeout", type=float, default=60.0)
+    ap.add_argument("--late", type=float, default=0.0, help="seconds to wait before joining")
+    a = ap.parse_args()
+    time.sleep(a.late)
+    dp = DomainParticipant(a.domain)
+    reliable = Qos(
+        Policy.Reliability.Reliable(duration(seconds=1)),
+        Policy.Durability.Volatile,
+        Policy.History.KeepLast(10),
+    )
+    latched = Qos(
+        Policy.Reliability.Reliable(duration(seconds=1)),
+        Policy.Durability.TransientLocal,
+        Policy.History.KeepLast(1),
+    )
+    ns = a.namespace.strip("/")
+    prefix = "rt/" + (ns + "/" if ns else "")
+    readers = {
+        "/scan": DataReader(dp, Topic(dp, prefix + "scan", LaserScan), qos=reliable),
+        "/pose": DataReader(dp, Topic(dp, prefix + "pose", PoseWithCovarianceStamped), qos=reliable),
+        "/tf": DataReader(dp, Topic(dp, prefix + "tf", TFMessage), qos=reliable),
+        "/tf_static": DataReader(dp, Topic(dp, prefix + "tf_static", TFMessage), qos=latched),
+    }
+    got = {k: [] for k in readers}
+    started = time.monotonic()
+    deadline = started + a.timeout
+    first_at = {}
+    def enough():
+        return got["/tf_static"] and all(
+            len(v) >= 3 for k, v in got.items() if k != "/tf_static"
+        )
+
+    while time.monotonic() < deadline and not enough():
+        for k, r in readers.items():
+            for s in r.take(N=10):
+                got[k].append(s)
+                first_at.setdefault(k, time.monotonic() - started)
+        time.sleep(0.02)
+    report = {k: len(v) for k, v in got.items()}
+    report["seconds_to_first"] = first_at
+    if got["/scan"]:
+        s = got["/scan"][-1]
+        report["scan"] = {
+            "frame_id": s.header.frame_id,
+            "stamp": s.header.stamp.sec + s.header.stamp.nanosec * 1e-9,
+            "beams": len(s.ranges),
+            "angle_min": s.angle_min,
+            "angle_increment": s.angle_increment,
+            "range_max": s.range_max,
+            "time_increment": s.time_increment,
+            "infinite": sum(1 for r in s.ranges if math.isinf(r)),
+        }
+    if got["/pose"]:
+        p = got["/pose"][-1]
+        report["pose"] = {
+            "frame_id": p.header.frame_id,
+            "x": p.pose.pose.position.x,
+            "y": p.pose.pose.position.y,
+            "yaw": yaw(p.pose.pose.orientation),
+            "var_x": p.pose.covariance[0],
+            "var_yaw": p.pose.covariance[35],
+        }
+    if got["/tf"]:
+        report["tf"] = [
+            [t.header.frame_id, t.child_frame_id] for t in got["/tf"][-1].transforms
+        ]
+    if got["/tf_static"]:
+        report["tf_static"] = [
+            [t.header.frame_id, t.child_frame_id] for t in got["/tf_static"][-1].transforms
+        ]
+    print(json.dumps(report))
+    sys.exit(0 if all(got.values()) else 1)
+
+
+if __name__ == "__main__":
+    main()
