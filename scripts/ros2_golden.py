@@ -121,6 +121,23 @@ pose = Pwcs(
 )
 cases.append(("pose_with_covariance_stamped", pose, "geometry_msgs/msg/PoseWithCovarianceStamped"))
 
+Meta = T["nav_msgs/msg/MapMetaData"]
+grid = T["nav_msgs/msg/OccupancyGrid"](
+    header=header(9, 1, "map"),
+    info=Meta(
+        map_load_time=Time(sec=8, nanosec=2),
+        resolution=0.05,
+        width=3,
+        height=2,
+        origin=Pose(
+            position=Point(x=-1.25, y=-0.5, z=0.0),
+            orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
+        ),
+    ),
+    data=__import__("numpy").array([0, 100, -1, -1, 0, 100], dtype=__import__("numpy").int8),
+)
+cases.append(("occupancy_grid", grid, "nav_msgs/msg/OccupancyGrid"))
+
 Layout = T["std_msgs/msg/MultiArrayLayout"]
 raw = T["std_msgs/msg/UInt8MultiArray"](
     layout=Layout(dim=[], data_offset=0), data=u8([0x02, 0x80, 0xD6, 0x02, 0xB0])

@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
 """A ROS 2 subscriber on an independent DDS stack (PyPI `cyclonedds`, no
-ROS installation): subscribes to /scan, /pose, /tf and /tf_static as RViz
+ROS installation): subscribes to /scan, /pose, /tf, /tf_static and /map as RViz
 would, with the ROS 2 type names and the message layouts written here from
 the ROS 2 definitions, waits (bounded) for samples on each, and prints one
-JSON report. /tf_static is read transient-local, so a subscriber that
-joins after it was sent still gets it.
+JSON report. /tf_static and /map are read transient-local, so a
+subscriber that joins after they were sent still gets them.
 
     python3 scripts/ros2_subscriber.py --domain 0 --timeout 60 [--namespace /robot1]
 
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import array, float32, float64, int32, sequence, uint32
+from cyclonedds.idl.types import array, float32, float64, int8, int32, sequence, uint32
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
@@ -108,6 +108,22 @@ class TransformStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TransformS
 
 
 @dataclass
+class MapMetaData(IdlStruct, typename="nav_msgs::msg::dds_::MapMetaData_"):
+    map_load_time: Time
+    resolution: float32
+    width: uint32
+    height: uint32
+    origin: Pose
+
+
+@dataclass
+class OccupancyGrid(IdlStruct, typename="nav_msgs::msg::dds_::OccupancyGrid_"):
+    header: Header
+    info: MapMetaData
+    data: sequence[int8]
+
+
+@dataclass
 class TFMessage(IdlStruct, typename="tf2_msgs::msg::dds_::TFMessage_"):
     transforms: sequence[TransformStamped]
 
@@ -142,14 +158,16 @@ def main():
         "/pose": DataReader(dp, Topic(dp, prefix + "pose", PoseWithCovarianceStamped), qos=reliable),
         "/tf": DataReader(dp, Topic(dp, prefix + "tf", TFMessage), qos=reliable),
         "/tf_static": DataReader(dp, Topic(dp, prefix + "tf_static", TFMessage), qos=latched),
+        "/map": DataReader(dp, Topic(dp, prefix + "map", OccupancyGrid), qos=latched),
     }
     got = {k: [] for k in readers}
     started = time.monotonic()
     deadline = started + a.timeout
     first_at = {}
     def enough():
-        return got["/tf_static"] and all(
-            len(v) >= 3 for k, v in got.items() if k != "/tf_static"
+        latched = ("/tf_static", "/map")
+        return all(got[k] for k in latched) and all(
+            len(v) >= 3 for k, v in got.items() if k not in latched
         )
 
     while time.monotonic() < deadline and not enough():
@@ -190,6 +208,18 @@ def main():
         report["tf_static"] = [
             [t.header.frame_id, t.child_frame_id] for t in got["/tf_static"][-1].transforms
         ]
+    if got["/map"]:
+        m = got["/map"][-1]
+        data = list(m.data)
+        report["map"] = {
+            "frame_id": m.header.frame_id,
+            "resolution": m.info.resolution,
+            "cells": m.info.width * m.info.height,
+            "data": len(data),
+            "free": data.count(0),
+            "occupied": data.count(100),
+            "unknown": data.count(-1),
+        }
     print(json.dumps(report))
     sys.exit(0 if all(got.values()) else 1)
 

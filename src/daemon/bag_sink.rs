@@ -11,9 +11,9 @@ use std::time::{Duration, Instant};
 
 use tracing::{error, info, warn};
 
-use super::ros2_out::{Ros2Message, Stamped};
+use super::ros2_out::{Ros2Message, Stamped, grid_message};
 use crate::ros2::bag::{BagError, BagTopic, BagWriter, Durability};
-use crate::ros2::{LaserScan, Odometry, PoseWithCovarianceStamped, TfMessage};
+use crate::ros2::{LaserScan, OccupancyGrid, Odometry, PoseWithCovarianceStamped, TfMessage};
 
 /// The bag's name in the run's directory.
 pub const BAG_FILE: &str = "run.mcap";
@@ -38,6 +38,7 @@ struct Topics {
     odom: BagTopic<Odometry>,
     tf: BagTopic<TfMessage>,
     tf_static: BagTopic<TfMessage>,
+    map: BagTopic<OccupancyGrid>,
 }
 
 impl BagSink {
@@ -50,6 +51,7 @@ impl BagSink {
             odom: bag.topic("/odom", Durability::Volatile)?,
             tf: bag.topic("/tf", Durability::Volatile)?,
             tf_static: bag.topic("/tf_static", Durability::TransientLocal)?,
+            map: bag.topic("/map", Durability::TransientLocal)?,
         };
         let (tx, rx) = sync_channel(QUEUE);
         let thread = std::thread::Builder::new()
@@ -116,6 +118,10 @@ fn write_all(mut bag: BagWriter, mut t: Topics, rx: &Receiver<Stamped>) -> Resul
                     Ros2Message::Odometry(m) => bag.write(&mut t.odom, stamp_ns, m.as_ref()),
                     Ros2Message::Tf(m) => bag.write(&mut t.tf, stamp_ns, m),
                     Ros2Message::TfStatic(m) => bag.write(&mut t.tf_static, stamp_ns, m),
+                    Ros2Message::Map(m) => match grid_message(m) {
+                        Some(grid) => bag.write(&mut t.map, stamp_ns, &grid),
+                        None => Ok(()),
+                    },
                 };
                 if let Err(e) = result {
                     error!("the bag stops here: {}", crate::error_chain(&e));

@@ -33,8 +33,9 @@ pub struct DaemonConfig {
 }
 
 /// `[ros2]`: a ROS 2 node on DDS (pure Rust, no ROS installation) that
-/// publishes what the daemon's bag holds: /scan, /pose, /odom, /tf and
-/// /tf_static (frames `map`, `odom`, `base_link`, `laser`, REP 105).
+/// publishes what the daemon's bag holds: /scan, /pose, /odom, /tf,
+/// /tf_static and /map (frames `map`, `odom`, `base_link`, `laser`, REP
+/// 105).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Ros2Section {
@@ -357,7 +358,7 @@ pub struct LoopConfig {
     /// says so in STATUS=.
     pub ready_after: f64,
     /// Write a rosbag2 MCAP bag of the run, `run.mcap` in the run's
-    /// directory: /scan, /pose, /odom, /tf and /tf_static, as ROS 2 tools
+    /// directory: /scan, /pose, /odom, /tf, /tf_static and /map, as ROS 2 tools
     /// (Foxglove, `ros2 bag play`, RViz) read them (default false).
     pub bag: bool,
 }

@@ -256,6 +256,13 @@ impl Core {
             let odometry = self.live.odometry_at(t);
             let cov = self.live.mapper().last_covariance();
             out.scan(&scan, outcome.pose, &cov, odometry);
+            // The map changes with every keyframe and every optimisation.
+            let mapper = self.live.mapper();
+            let version = (mapper.keyframe_graph().keyframes().len() as u64) << 32
+                | (self.optimisations & 0xffff_ffff);
+            if out.map_due(version, t) {
+                out.map(version, t, std::sync::Arc::new(mapper.cls_map().clone()));
+            }
         }
         if self.first_scan_after.is_none() {
             self.first_scan_after = Some(now);

@@ -7,8 +7,9 @@
 //! ones checked against an independent serializer): every topic carries
 //! them unchanged, so the DDS shell adds no second encoding. Every topic
 //! is reliable (a reliable writer serves best-effort and reliable readers
-//! alike: RViz, Foxglove and `ros2 topic echo` all match); `/tf_static` is
-//! transient-local, so a subscriber that joins late still gets it.
+//! alike: RViz, Foxglove and `ros2 topic echo` all match); `/tf_static`
+//! and `/map` are transient-local, so a subscriber that joins late still
+//! gets them.
 
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::thread::JoinHandle;
@@ -23,8 +24,10 @@ use serde::ser::{Serialize, SerializeTuple, Serializer};
 use tracing::{info, warn};
 
 use super::config::Ros2Section;
-use super::ros2_out::{Ros2Message, Stamped};
-use crate::ros2::{LaserScan, Odometry, PoseWithCovarianceStamped, RosMessage, TfMessage};
+use super::ros2_out::{Ros2Message, Stamped, grid_message};
+use crate::ros2::{
+    LaserScan, OccupancyGrid, Odometry, PoseWithCovarianceStamped, RosMessage, TfMessage,
+};
 
 /// Messages in flight to the node at most (about 5 s of scans).
 const QUEUE: usize = 1024;
@@ -67,6 +70,7 @@ struct Publishers {
     odom: Publisher<CdrBody>,
     tf: Publisher<CdrBody>,
     tf_static: Publisher<CdrBody>,
+    map: Publisher<CdrBody>,
     /// Kept alive while publishing.
     _node: Node,
 }
@@ -128,7 +132,9 @@ fn start_node(cfg: &Ros2Section) -> Result<Publishers, String> {
         &reliable.clone().history(History::KeepLast { depth: 100 }),
     )?;
     let tf_static = publisher("tf_static", TfMessage::TYPE, &latched)?;
+    let map = publisher("map", OccupancyGrid::TYPE, &latched)?;
     Ok(Publishers {
+        map,
         scan,
         pose,
         odom,
@@ -161,7 +167,7 @@ impl DdsSink {
             Ok(Err(e)) => return Err(DdsError::Start(e)),
             Err(_) => return Err(DdsError::Start("the node's thread ended".into())),
         }
-        info!("ROS 2 node up: publishing /scan /pose /odom /tf /tf_static");
+        info!("ROS 2 node up: publishing /scan /pose /odom /tf /tf_static /map");
         Ok(DdsSink {
             tx: Some(tx),
             thread: Some(thread),
@@ -210,6 +216,11 @@ fn publish_all(p: &Publishers, rx: &Receiver<Stamped>) {
             Ros2Message::Odometry(m) => p.odom.publish(body(m.as_ref())),
             Ros2Message::Tf(m) => p.tf.publish(body(m)),
             Ros2Message::TfStatic(m) => p.tf_static.publish(body(m)),
+            // Rendered here, off the loop.
+            Ros2Message::Map(m) => match grid_message(m) {
+                Some(grid) => p.map.publish(body(&grid)),
+                None => Ok(()),
+            },
         };
         if result.is_err() {
             failures += 1;

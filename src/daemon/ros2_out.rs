@@ -9,13 +9,17 @@
 //! clock at that start, so stamps are ROS times (ns since the epoch).
 
 use std::collections::VecDeque;
+use std::sync::Arc;
+
+use crate::map::cls::{ClsMap, GridConfig, occupancy_grid};
 
 use crate::geometry::{Pose2, RangeScan};
 use crate::input::bag::laser_scan;
 use crate::input::lms200::lms200_scan_timing;
 use crate::ros2::msg::{PoseWithCovariance, TransformStamped, TwistWithCovariance};
 use crate::ros2::{
-    Header, LaserScan, Odometry, PoseWithCovarianceStamped, Quaternion, TfMessage, Time, Vector3,
+    Header, LaserScan, OccupancyGrid, Odometry, PoseWithCovarianceStamped, Quaternion, TfMessage,
+    Time, Vector3,
 };
 
 /// REP 105 frame names.
@@ -23,6 +27,13 @@ pub const MAP_FRAME: &str = "map";
 pub const ODOM_FRAME: &str = "odom";
 pub const BASE_FRAME: &str = "base_link";
 pub const LASER_FRAME: &str = "laser";
+
+/// `/map` is sent at most this often (s), and only when the map changed.
+pub const MAP_EVERY: f64 = 5.0;
+/// Cell side of `/map` (m), coarsened (doubled) until the grid has at most
+/// [`MAP_MAX_CELLS`] cells: DDS carries a megabyte or two well, not tens.
+pub const MAP_RESOLUTION: f64 = 0.05;
+pub const MAP_MAX_CELLS: usize = 2_000_000;
 
 /// Messages held for the shell at most; older ones are dropped (and
 /// counted) if it does not take them, so the loop's memory stays bounded.
@@ -43,6 +54,22 @@ pub enum Ros2Message {
     Tf(TfMessage),
     /// `/tf_static` (transient-local: a late subscriber still gets it).
     TfStatic(TfMessage),
+    /// `/map` (transient-local): the CLS map as it was, to be rendered as
+    /// an occupancy grid by the shell ([`grid_message`]), off the loop.
+    Map(MapSnapshot),
+}
+
+/// The CLS map at one time, shared (cloning it is the loop's one cost).
+#[derive(Debug, Clone)]
+pub struct MapSnapshot {
+    pub map: Arc<ClsMap>,
+    pub stamp: Time,
+}
+
+impl PartialEq for MapSnapshot {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.map, &other.map) && self.stamp == other.stamp
+    }
 }
 
 impl Ros2Message {
@@ -54,6 +81,7 @@ impl Ros2Message {
             Ros2Message::Odometry(_) => "/odom",
             Ros2Message::Tf(_) => "/tf",
             Ros2Message::TfStatic(_) => "/tf_static",
+            Ros2Message::Map(_) => "/map",
         }
     }
 }
@@ -76,6 +104,8 @@ pub struct Ros2Outbox {
     queue: VecDeque<Stamped>,
     static_sent: bool,
     dropped: u64,
+    /// What the last `/map` was taken of, and when (daemon clock, s).
+    map_sent: Option<(u64, f64)>,
 }
 
 /// A pose as a ROS transform of `child` in `parent` at `stamp`.
@@ -124,7 +154,23 @@ impl Ros2Outbox {
             queue: VecDeque::new(),
             static_sent: false,
             dropped: 0,
+            map_sent: None,
         }
+    }
+
+    /// Whether a map that is now at `version` (any number that changes
+    /// when the map does) is due at `t`: changed, and [`MAP_EVERY`] since
+    /// the last.
+    pub fn map_due(&self, version: u64, t: f64) -> bool {
+        self.map_sent
+            .is_none_or(|(v, at)| v != version && t - at >= MAP_EVERY)
+    }
+
+    /// Queues `map` (at `version`) for `/map` at `t`.
+    pub fn map(&mut self, version: u64, t: f64, map: Arc<ClsMap>) {
+        self.map_sent = Some((version, t));
+        let stamp = Time::from_secs(self.epoch + t).unwrap_or_default();
+        self.push(t, Ros2Message::Map(MapSnapshot { map, stamp }));
     }
 
     fn push(&mut self, t: f64, message: Ros2Message) {
@@ -224,6 +270,54 @@ impl Ros2Outbox {
     pub fn dropped(&self) -> u64 {
         self.dropped
     }
+}
+
+/// A map snapshot as an OccupancyGrid in `map` (0 free, 100 occupied,
+/// −1 unknown), at [`MAP_RESOLUTION`] or coarser to stay within
+/// [`MAP_MAX_CELLS`]; `None` for an empty map.
+pub fn grid_message(snapshot: &MapSnapshot) -> Option<OccupancyGrid> {
+    use crate::map::cls::grid::{FREE, OCCUPIED};
+    if snapshot.map.is_empty() {
+        return None;
+    }
+    let mut cfg = GridConfig {
+        resolution: MAP_RESOLUTION,
+        ..GridConfig::default()
+    };
+    let grid = loop {
+        match occupancy_grid(&snapshot.map, &cfg) {
+            Ok(g) if g.width * g.height <= MAP_MAX_CELLS => break g,
+            Ok(_) | Err(crate::map::cls::GridError::TooLarge(_)) if cfg.resolution < 10.0 => {
+                cfg.resolution *= 2.0;
+            }
+            _ => return None,
+        }
+    };
+    Some(OccupancyGrid {
+        header: Header {
+            stamp: snapshot.stamp,
+            frame_id: MAP_FRAME.into(),
+        },
+        map_load_time: snapshot.stamp,
+        resolution: grid.resolution as f32,
+        width: u32::try_from(grid.width).ok()?,
+        height: u32::try_from(grid.height).ok()?,
+        origin_position: Vector3 {
+            x: grid.origin[0],
+            y: grid.origin[1],
+            z: 0.0,
+        },
+        origin_orientation: Quaternion::from_yaw(0.0),
+        data: grid
+            .cells
+            .iter()
+            .map(|&v| match v {
+                FREE => 0,
+                OCCUPIED => 100,
+                _ => -1,
+            })
+            .collect(),
+    })
 }
 
 #[cfg(test)]

@@ -110,6 +110,11 @@ impl CdrWriter {
         self.buf.extend_from_slice(v);
     }
 
+    pub fn i8_seq(&mut self, v: &[i8]) {
+        self.count(v.len());
+        self.buf.extend(v.iter().map(|&x| x as u8));
+    }
+
     /// The message's bytes, header included.
     pub fn finish(self) -> Vec<u8> {
         self.buf
@@ -231,6 +236,10 @@ impl<'a> CdrReader<'a> {
         let v = self.data[self.pos..self.pos + n].to_vec();
         self.pos += n;
         Ok(v)
+    }
+
+    pub fn i8_seq(&mut self) -> Result<Vec<i8>, CdrError> {
+        Ok(self.u8_seq()?.into_iter().map(|b| b as i8).collect())
     }
 
     /// Checks that only alignment padding (at most 7 bytes) follows.

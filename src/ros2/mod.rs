@@ -7,6 +7,6 @@ pub mod msg;
 
 pub use cdr::{CdrError, CdrReader, CdrWriter};
 pub use msg::{
-    ByteArray, Header, LaserScan, Odometry, PoseWithCovariance, PoseWithCovarianceStamped,
-    Quaternion, RosMessage, TfMessage, Time, TransformStamped, Vector3,
+    ByteArray, Header, LaserScan, OccupancyGrid, Odometry, PoseWithCovariance,
+    PoseWithCovarianceStamped, Quaternion, RosMessage, TfMessage, Time, TransformStamped, Vector3,
 };

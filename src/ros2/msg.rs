@@ -82,6 +82,15 @@ const FIELDS: &[(&str, &str)] = &[
         "std_msgs/Header header\ngeometry_msgs/PoseWithCovariance pose\n",
     ),
     (
+        "nav_msgs/MapMetaData",
+        "builtin_interfaces/Time map_load_time\nfloat32 resolution\nuint32 width\nuint32 height\n\
+         geometry_msgs/Pose origin\n",
+    ),
+    (
+        "nav_msgs/OccupancyGrid",
+        "std_msgs/Header header\nnav_msgs/MapMetaData info\nint8[] data\n",
+    ),
+    (
         "tf2_msgs/TFMessage",
         "geometry_msgs/TransformStamped[] transforms\n",
     ),
@@ -453,6 +462,53 @@ impl RosMessage for PoseWithCovarianceStamped {
                 orientation: Quaternion::read(r)?,
                 covariance: read_covariance(r)?,
             },
+        })
+    }
+
+    fn definition() -> String {
+        schema(Self::TYPE)
+    }
+}
+
+/// `nav_msgs/OccupancyGrid`: cells of `resolution` (m), `width` × `height`,
+/// row-major from the cell at `origin` (its lower-left corner; rows go
+/// along +y); 0 free, 100 occupied, −1 unknown.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct OccupancyGrid {
+    pub header: Header,
+    pub map_load_time: Time,
+    pub resolution: f32,
+    pub width: u32,
+    pub height: u32,
+    pub origin_position: Vector3,
+    pub origin_orientation: Quaternion,
+    pub data: Vec<i8>,
+}
+
+impl RosMessage for OccupancyGrid {
+    const TYPE: &'static str = "nav_msgs/msg/OccupancyGrid";
+
+    fn write(&self, w: &mut CdrWriter) {
+        self.header.write(w);
+        self.map_load_time.write(w);
+        w.f32(self.resolution);
+        w.u32(self.width);
+        w.u32(self.height);
+        self.origin_position.write(w);
+        self.origin_orientation.write(w);
+        w.i8_seq(&self.data);
+    }
+
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        Ok(OccupancyGrid {
+            header: Header::read(r)?,
+            map_load_time: Time::read(r)?,
+            resolution: r.f32()?,
+            width: r.u32()?,
+            height: r.u32()?,
+            origin_position: Vector3::read(r)?,
+            origin_orientation: Quaternion::read(r)?,
+            data: r.i8_seq()?,
         })
     }
 

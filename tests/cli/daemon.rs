@@ -382,6 +382,7 @@ fn run_writes_a_rosbag2_bag_whose_transforms_chain_to_its_poses() {
     let scans = counts["/scan"];
     assert!(scans > 20, "{counts:?}");
     assert_eq!(counts["/tf_static"], 1, "{counts:?}");
+    assert!(counts.get("/map").is_some_and(|&n| n >= 1), "{counts:?}");
     for topic in ["/pose", "/tf", "/odom"] {
         assert_eq!(counts[topic], scans, "{topic}: {counts:?}");
     }
@@ -438,6 +439,7 @@ fn an_independent_reader_decodes_every_message_of_the_daemon_s_bag() {
         ("/odom", "nav_msgs/msg/Odometry"),
         ("/tf", "tf2_msgs/msg/TFMessage"),
         ("/tf_static", "tf2_msgs/msg/TFMessage"),
+        ("/map", "nav_msgs/msg/OccupancyGrid"),
     ] {
         assert_eq!(report["topics"][topic]["type"], ty, "{report}");
         assert!(
@@ -452,8 +454,8 @@ fn an_independent_reader_decodes_every_message_of_the_daemon_s_bag() {
 /// `cyclonedds`, `scripts/ros2_subscriber.py`, with the message layouts
 /// written there from the ROS 2 definitions): a subscriber that joins
 /// after the start gets /scan, /pose, /tf and, transient-local, the
-/// /tf_static sent at the first scan; frames as REP 105, stamps on the
-/// wall clock.
+/// /tf_static sent at the first scan and the latest /map; frames as REP
+/// 105, stamps on the wall clock.
 #[test]
 #[ignore = "needs PyPI cyclonedds; CI runs it: cargo test --test cli -- --ignored"]
 fn an_independent_dds_subscriber_sees_the_daemon_s_topics() {

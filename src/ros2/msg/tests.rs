@@ -117,6 +117,23 @@ fn pose_with_covariance_stamped() -> PoseWithCovarianceStamped {
     }
 }
 
+fn occupancy_grid() -> OccupancyGrid {
+    OccupancyGrid {
+        header: header(9, 1, "map"),
+        map_load_time: Time { sec: 8, nanosec: 2 },
+        resolution: 0.05,
+        width: 3,
+        height: 2,
+        origin_position: Vector3 {
+            x: -1.25,
+            y: -0.5,
+            z: 0.0,
+        },
+        origin_orientation: Quaternion::from_yaw(0.0),
+        data: vec![0, 100, -1, -1, 0, 100],
+    }
+}
+
 fn byte_array() -> ByteArray {
     ByteArray {
         data: vec![0x02, 0x80, 0xD6, 0x02, 0xB0],
@@ -129,6 +146,7 @@ fn messages_match_the_independent_serializer() {
     assert_eq!(odometry().to_cdr(), golden("odometry"));
     assert_eq!(tf_message().to_cdr(), golden("tf_message"));
     assert_eq!(byte_array().to_cdr(), golden("byte_array"));
+    assert_eq!(occupancy_grid().to_cdr(), golden("occupancy_grid"));
     assert_eq!(
         pose_with_covariance_stamped().to_cdr(),
         golden("pose_with_covariance_stamped")
