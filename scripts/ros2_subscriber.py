@@ -8,6 +8,9 @@ subscriber that joins after they were sent still gets them.
 
     python3 scripts/ros2_subscriber.py --domain 0 --timeout 60 [--namespace /robot1]
 
+With --cmd-vel V it then drives the robot: Twist messages on /cmd_vel at
+10 Hz for --drive seconds, and reports how far the pose moved.
+
 Exits 1 if a topic saw nothing before the timeout.
 """
 import argparse
@@ -124,6 +127,12 @@ class OccupancyGrid(IdlStruct, typename="nav_msgs::msg::dds_::OccupancyGrid_"):
 
 
 @dataclass
+class Twist(IdlStruct, typename="geometry_msgs::msg::dds_::Twist_"):
+    linear: Vector3
+    angular: Vector3
+
+
+@dataclass
 class TFMessage(IdlStruct, typename="tf2_msgs::msg::dds_::TFMessage_"):
     transforms: sequence[TransformStamped]
 
@@ -138,6 +147,13 @@ def main():
     ap.add_argument("--namespace", default="")
     ap.add_argument("--timeout", type=float, default=60.0)
     ap.add_argument("--late", type=float, default=0.0, help="seconds to wait before joining")
+    ap.add_argument(
+        "--cmd-vel",
+        type=float,
+        default=None,
+        help="also drive: publish this forward speed (m/s) on /cmd_vel at 10 Hz for --drive seconds",
+    )
+    ap.add_argument("--drive", type=float, default=3.0)
     a = ap.parse_args()
     time.sleep(a.late)
     dp = DomainParticipant(a.domain)
@@ -161,6 +177,11 @@ def main():
         "/map": DataReader(dp, Topic(dp, prefix + "map", OccupancyGrid), qos=latched),
     }
     got = {k: [] for k in readers}
+    driver = None
+    if a.cmd_vel is not None:
+        from cyclonedds.pub import DataWriter
+
+        driver = DataWriter(dp, Topic(dp, prefix + "cmd_vel", Twist), qos=reliable)
     started = time.monotonic()
     deadline = started + a.timeout
     first_at = {}
@@ -170,7 +191,21 @@ def main():
             len(v) >= 3 for k, v in got.items() if k not in latched
         )
 
-    while time.monotonic() < deadline and not enough():
+    drive_until = None
+    next_command = 0.0
+    while time.monotonic() < deadline:
+        now = time.monotonic()
+        if enough():
+            if driver is None:
+                break
+            if drive_until is None:
+                drive_until = now + a.drive
+                report_start = got["/pose"][-1]
+            if now >= drive_until:
+                break
+            if now >= next_command:
+                driver.write(Twist(linear=Vector3(a.cmd_vel, 0.0, 0.0), angular=Vector3(0.0, 0.0, 0.0)))
+                next_command = now + 0.1
         for k, r in readers.items():
             for s in r.take(N=10):
                 got[k].append(s)
@@ -220,6 +255,15 @@ def main():
             "occupied": data.count(100),
             "unknown": data.count(-1),
         }
+    if driver is not None and drive_until is not None:
+        # Let the last commands' motion show in the poses.
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:
+            for s in readers["/pose"].take(N=10):
+                got["/pose"].append(s)
+            time.sleep(0.02)
+        a0, a1 = report_start.pose.pose.position, got["/pose"][-1].pose.pose.position
+        report["driven"] = {"dx": a1.x - a0.x, "dy": a1.y - a0.y, "seconds": a.drive}
     print(json.dumps(report))
     sys.exit(0 if all(got.values()) else 1)
 

@@ -89,6 +89,10 @@ struct Timers {
 /// Seconds between map snapshots for the live view at most: a snapshot
 /// copies the map, which grows with the building.
 const MAP_VIEW_EVERY: f64 = 1.0;
+/// A velocity command drives the base this long (s) and no longer: a
+/// teleop that stops sending (a dropped link, a closed window) stops the
+/// robot. Half a second, as ROS base drivers' command timeouts.
+pub const TELEOP_TIMEOUT: f64 = 0.5;
 
 /// Seconds within which the same pose hint again is a repeat of it (a
 /// bridge resending its line), not a new hint.
@@ -138,6 +142,8 @@ pub struct Core {
     search_time: f64,
     search_waiting: bool,
     was_turning: bool,
+    /// The last velocity command from ROS 2 (`/cmd_vel`) and when it came.
+    teleop: Option<(f64, Twist)>,
     last_control_at: Option<f64>,
     /// The last pose hint and when it came (s): the same hint again within
     /// [`REPEATED_HINT`] is a bridge repeating itself, not a new one.
@@ -206,6 +212,7 @@ impl Core {
             search_time: 0.0,
             search_waiting: false,
             was_turning: false,
+            teleop: None,
             last_control_at: None,
             last_hint: None,
         }
@@ -335,6 +342,42 @@ impl Core {
             }
             ControlCommand::Pose(pose) => self.handle_pose_hint(now, pose, "the live view"),
         }
+    }
+
+    /// A velocity command from outside (ROS 2 `/cmd_vel`, base frame: m/s
+    /// forward and left, rad/s) at `now`. It drives the base through the
+    /// same limits and stops when exploration is off, for
+    /// [`TELEOP_TIMEOUT`] s; after that the base stops until the next.
+    /// With exploration on, the explorer drives and commands are ignored.
+    pub fn handle_velocity_command(&mut self, now: f64, twist: Twist) {
+        if self.live.explorer().is_some() {
+            if self.teleop.is_none() {
+                warn!("velocity commands are ignored while exploring");
+                self.teleop = Some((f64::NEG_INFINITY, Twist::ZERO));
+            }
+            return;
+        }
+        if !(twist.vx.is_finite() && twist.vy.is_finite() && twist.omega.is_finite()) {
+            warn!("a velocity command that is not finite is ignored");
+            return;
+        }
+        if self.teleop.is_none() {
+            info!("driven by velocity commands (/cmd_vel)");
+        }
+        self.teleop = Some((now, twist));
+    }
+
+    /// The command teleoperation gives now, if it drives.
+    fn teleop_command(&self, now: f64) -> Option<Twist> {
+        if self.live.explorer().is_some() {
+            return None;
+        }
+        let (at, twist) = self.teleop?;
+        Some(if now - at <= TELEOP_TIMEOUT {
+            twist
+        } else {
+            Twist::ZERO
+        })
     }
 
     /// Odometry and health from the base, and its pose hint if it sent one.
@@ -501,6 +544,7 @@ impl Core {
         // place; one paused from the live view is held.
         let searching = self.follow_search(now, sensor_ok);
         let turning = searching && !self.search_waiting && self.config.map.turn_rate > 0.0;
+        let manual = manual.or_else(|| self.teleop_command(now));
         let manual = if self.paused {
             self.live.hold_exploration(now);
             Some(Twist::ZERO)
@@ -787,6 +831,26 @@ mod tests {
         let live = LiveMapper::new(config.mapper, None, 0.0);
         let base = BaseDriver::new(None, config.base.limits(), 0.5, 1.0, 8.0);
         Core::new(config, live, base)
+    }
+
+    #[test]
+    fn a_velocity_command_drives_for_half_a_second_then_the_base_stops() {
+        let mut c = core("");
+        assert_eq!(c.teleop_command(0.0), None, "no teleop: nothing changes");
+        let t = Twist {
+            vx: 0.3,
+            vy: -0.1,
+            omega: 0.2,
+        };
+        c.handle_velocity_command(1.0, t);
+        assert_eq!(c.teleop_command(1.0 + TELEOP_TIMEOUT), Some(t));
+        assert_eq!(c.teleop_command(1.01 + TELEOP_TIMEOUT), Some(Twist::ZERO));
+        c.handle_velocity_command(3.0, Twist { vx: f64::NAN, ..t });
+        assert_eq!(
+            c.teleop_command(3.0),
+            Some(Twist::ZERO),
+            "not finite: ignored"
+        );
     }
 
     #[test]

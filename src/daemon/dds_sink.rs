@@ -11,13 +11,13 @@
 //! and `/map` are transient-local, so a subscriber that joins late still
 //! gets them.
 
-use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
 use ros2_client::{
     Context, ContextOptions, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher,
-    QosProfile,
+    QosProfile, Subscription,
     qos::{Durability, History, WhenFull},
 };
 use serde::ser::{Serialize, SerializeTuple, Serializer};
@@ -25,9 +25,24 @@ use tracing::{info, warn};
 
 use super::config::Ros2Section;
 use super::ros2_out::{Ros2Message, Stamped, grid_message};
+use crate::geometry::Pose2;
 use crate::ros2::{
-    LaserScan, OccupancyGrid, Odometry, PoseWithCovarianceStamped, RosMessage, TfMessage,
+    LaserScan, OccupancyGrid, Odometry, PoseWithCovarianceStamped, RosMessage, TfMessage, Twist,
 };
+
+/// What the node hears and hands to the loop.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Ros2Command {
+    /// `/cmd_vel`: drive (base frame, m/s, rad/s).
+    Velocity(clsmap_base::Twist),
+    /// `/initialpose` (RViz's "2D Pose Estimate"): the robot is about here
+    /// (map frame).
+    PoseHint(Pose2),
+}
+
+/// How often the node looks for incoming messages (s) while no message
+/// goes out.
+const LISTEN_EVERY: Duration = Duration::from_millis(20);
 
 /// Messages in flight to the node at most (about 5 s of scans).
 const QUEUE: usize = 1024;
@@ -71,6 +86,8 @@ struct Publishers {
     tf: Publisher<CdrBody>,
     tf_static: Publisher<CdrBody>,
     map: Publisher<CdrBody>,
+    cmd_vel: Subscription<Twist>,
+    initial_pose: Subscription<PoseWithCovarianceStamped>,
     /// Kept alive while publishing.
     _node: Node,
 }
@@ -133,8 +150,26 @@ fn start_node(cfg: &Ros2Section) -> Result<Publishers, String> {
     )?;
     let tf_static = publisher("tf_static", TfMessage::TYPE, &latched)?;
     let map = publisher("map", OccupancyGrid::TYPE, &latched)?;
+    // Best-effort readers match reliable and best-effort writers alike
+    // (teleop tools and RViz use either).
+    let listen = QosProfile::subscription_default().history(History::KeepLast { depth: 10 });
+    let subscription = |topic: &str, ty: &str| {
+        let name = Name::new(namespace, topic).map_err(|e| format!("topic {topic}: {e:?}"))?;
+        node.create_topic(&name, type_name(ty), &listen)
+            .map_err(|e| format!("topic {topic}: {e:?}"))
+    };
+    let cmd_vel_topic = subscription("cmd_vel", Twist::TYPE)?;
+    let initial_pose_topic = subscription("initialpose", PoseWithCovarianceStamped::TYPE)?;
+    let cmd_vel = node
+        .create_subscription::<Twist>(&cmd_vel_topic, Some(listen.clone()))
+        .map_err(|e| format!("subscription: {e:?}"))?;
+    let initial_pose = node
+        .create_subscription::<PoseWithCovarianceStamped>(&initial_pose_topic, Some(listen))
+        .map_err(|e| format!("subscription: {e:?}"))?;
     Ok(Publishers {
         map,
+        cmd_vel,
+        initial_pose,
         scan,
         pose,
         odom,
@@ -146,7 +181,11 @@ fn start_node(cfg: &Ros2Section) -> Result<Publishers, String> {
 
 impl DdsSink {
     /// Starts the node as `cfg` says; returns once its publishers exist.
-    pub fn start(cfg: &Ros2Section) -> Result<DdsSink, DdsError> {
+    /// What it hears goes to `inbox`.
+    pub fn start(
+        cfg: &Ros2Section,
+        inbox: tokio::sync::mpsc::UnboundedSender<Ros2Command>,
+    ) -> Result<DdsSink, DdsError> {
         let (tx, rx) = sync_channel::<Stamped>(QUEUE);
         let (ready_tx, ready_rx) = sync_channel::<Result<(), String>>(1);
         let cfg = cfg.clone();
@@ -155,7 +194,7 @@ impl DdsSink {
             .spawn(move || match start_node(&cfg) {
                 Ok(p) => {
                     let _ = ready_tx.send(Ok(()));
-                    publish_all(&p, &rx);
+                    run_node(&p, &rx, &inbox);
                 }
                 Err(e) => {
                     let _ = ready_tx.send(Err(e));
@@ -167,7 +206,10 @@ impl DdsSink {
             Ok(Err(e)) => return Err(DdsError::Start(e)),
             Err(_) => return Err(DdsError::Start("the node's thread ended".into())),
         }
-        info!("ROS 2 node up: publishing /scan /pose /odom /tf /tf_static /map");
+        info!(
+            "ROS 2 node up: publishing /scan /pose /odom /tf /tf_static /map, listening to \
+             /cmd_vel /initialpose"
+        );
         Ok(DdsSink {
             tx: Some(tx),
             thread: Some(thread),
@@ -207,26 +249,62 @@ impl DdsSink {
     }
 }
 
-fn publish_all(p: &Publishers, rx: &Receiver<Stamped>) {
+fn run_node(
+    p: &Publishers,
+    rx: &Receiver<Stamped>,
+    inbox: &tokio::sync::mpsc::UnboundedSender<Ros2Command>,
+) {
     let mut failures = 0u64;
-    while let Ok(Stamped { message, .. }) = rx.recv() {
-        let result = match &message {
-            Ros2Message::Scan(m) => p.scan.publish(body(m)),
-            Ros2Message::Pose(m) => p.pose.publish(body(m.as_ref())),
-            Ros2Message::Odometry(m) => p.odom.publish(body(m.as_ref())),
-            Ros2Message::Tf(m) => p.tf.publish(body(m)),
-            Ros2Message::TfStatic(m) => p.tf_static.publish(body(m)),
-            // Rendered here, off the loop.
-            Ros2Message::Map(m) => match grid_message(m) {
-                Some(grid) => p.map.publish(body(&grid)),
-                None => Ok(()),
-            },
-        };
-        if result.is_err() {
-            failures += 1;
-            if failures == 1 {
-                warn!("a ROS 2 message could not be published (a reader too slow?)");
+    loop {
+        match rx.recv_timeout(LISTEN_EVERY) {
+            Ok(Stamped { message, .. }) => {
+                if publish(p, &message).is_err() {
+                    failures += 1;
+                    if failures == 1 {
+                        warn!("a ROS 2 message could not be published (a reader too slow?)");
+                    }
+                }
+            }
+            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Disconnected) => return,
+        }
+        while let Ok(Some((t, _))) = p.cmd_vel.take() {
+            let twist = clsmap_base::Twist {
+                vx: t.linear.x,
+                vy: t.linear.y,
+                omega: t.angular.z,
+            };
+            if inbox.send(Ros2Command::Velocity(twist)).is_err() {
+                return;
+            }
+        }
+        while let Ok(Some((m, _))) = p.initial_pose.take() {
+            let frame = m.header.frame_id.trim_start_matches('/');
+            if !(frame.is_empty() || frame == super::ros2_out::MAP_FRAME) {
+                warn!(frame, "a pose hint not in the map frame is ignored");
+                continue;
+            }
+            let q = &m.pose;
+            let pose = Pose2::new(q.position.x, q.position.y, q.orientation.yaw());
+            if inbox.send(Ros2Command::PoseHint(pose)).is_err() {
+                return;
             }
         }
     }
+}
+
+fn publish(p: &Publishers, message: &Ros2Message) -> Result<(), ()> {
+    let result = match message {
+        Ros2Message::Scan(m) => p.scan.publish(body(m)),
+        Ros2Message::Pose(m) => p.pose.publish(body(m.as_ref())),
+        Ros2Message::Odometry(m) => p.odom.publish(body(m.as_ref())),
+        Ros2Message::Tf(m) => p.tf.publish(body(m)),
+        Ros2Message::TfStatic(m) => p.tf_static.publish(body(m)),
+        // Rendered here, off the loop.
+        Ros2Message::Map(m) => match grid_message(m) {
+            Some(grid) => p.map.publish(body(&grid)),
+            None => Ok(()),
+        },
+    };
+    result.map_err(|_| ())
 }

@@ -332,6 +332,28 @@ fn replay_samples(
     Ok(samples)
 }
 
+/// What the ROS 2 node heard, given to the core.
+#[cfg(feature = "dds")]
+use super::dds_sink::Ros2Command;
+
+/// Without the node nothing is heard.
+#[cfg(not(feature = "dds"))]
+#[derive(Debug)]
+enum Ros2Command {}
+
+fn on_ros2(core: &mut Core, command: Ros2Command, now: f64) {
+    #[cfg(feature = "dds")]
+    match command {
+        Ros2Command::Velocity(twist) => core.handle_velocity_command(now, twist),
+        Ros2Command::PoseHint(pose) => core.handle_pose_hint(now, pose, "/initialpose"),
+    }
+    #[cfg(not(feature = "dds"))]
+    {
+        let _ = (core, now);
+        match command {}
+    }
+}
+
 /// Runs the daemon until the shutdown future completes, exploration ends
 /// (with `exit_when_complete`) or the time limit passes; then stops the
 /// base and the sensor and saves the map.
@@ -405,9 +427,15 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     let write_bag = config.daemon.bag;
     // The ROS 2 node before the loop starts: asked for, it must be there.
     #[cfg(feature = "dds")]
-    let mut dds = match config.ros2.enabled {
-        true => Some(super::dds_sink::DdsSink::start(&config.ros2)?),
-        false => None,
+    let (mut dds, mut ros2_inbox) = match config.ros2.enabled {
+        true => {
+            let (tx, rx) = mpsc::unbounded_channel();
+            (
+                Some(super::dds_sink::DdsSink::start(&config.ros2, tx)?),
+                Some(rx),
+            )
+        }
+        false => (None, None),
     };
     let publish = write_bag || config.ros2.enabled;
     let mut core = Core::new(config, live, base);
@@ -496,6 +524,13 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
                 optimisation_done(&mut core, result);
             }
             Some(report) = report_rx.recv() => on_report(&mut core, &report),
+            Some(command) = async {
+                #[cfg(feature = "dds")]
+                if let Some(inbox) = ros2_inbox.as_mut() {
+                    return inbox.recv().await;
+                }
+                std::future::pending::<Option<Ros2Command>>().await
+            } => on_ros2(&mut core, command, clock()),
             Some(command) = async {
                 match web_feed.as_mut() {
                     Some(feed) => feed.control.recv().await,

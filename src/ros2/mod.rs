@@ -8,5 +8,6 @@ pub mod msg;
 pub use cdr::{CdrError, CdrReader, CdrWriter};
 pub use msg::{
     ByteArray, Header, LaserScan, OccupancyGrid, Odometry, PoseWithCovariance,
-    PoseWithCovarianceStamped, Quaternion, RosMessage, TfMessage, Time, TransformStamped, Vector3,
+    PoseWithCovarianceStamped, Quaternion, RosMessage, TfMessage, Time, TransformStamped, Twist,
+    Vector3,
 };

@@ -2,6 +2,8 @@
 //! ROS 2 definitions (names, order, types), with their CDR form and the
 //! `ros2msg` schema text that bags carry.
 
+use serde::Deserialize;
+
 use super::cdr::{CdrError, CdrReader, CdrWriter};
 
 /// A ROS 2 message type.
@@ -140,7 +142,11 @@ fn schema(type_name: &str) -> String {
 }
 
 /// `builtin_interfaces/Time`: seconds and nanoseconds since the epoch.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+///
+/// The types a subscriber receives also derive `Deserialize`, field for
+/// field in the definition's order, for a DDS stack's serde-driven CDR
+/// reader.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
 pub struct Time {
     pub sec: i32,
     pub nanosec: u32,
@@ -186,7 +192,7 @@ impl Time {
 }
 
 /// `std_msgs/Header`.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, PartialEq, Eq, Default, Deserialize)]
 pub struct Header {
     pub stamp: Time,
     pub frame_id: String,
@@ -264,7 +270,7 @@ impl RosMessage for LaserScan {
 }
 
 /// `geometry_msgs/Vector3` and `geometry_msgs/Point` (same fields).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Deserialize)]
 pub struct Vector3 {
     pub x: f64,
     pub y: f64,
@@ -288,7 +294,7 @@ impl Vector3 {
 }
 
 /// `geometry_msgs/Quaternion`.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 pub struct Quaternion {
     pub x: f64,
     pub y: f64,
@@ -354,11 +360,36 @@ fn read_covariance(r: &mut CdrReader<'_>) -> Result<[f64; 36], CdrError> {
 
 /// `geometry_msgs/PoseWithCovariance`: position, orientation and the 6×6
 /// row-major covariance of (x, y, z, roll, pitch, yaw).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 pub struct PoseWithCovariance {
     pub position: Vector3,
     pub orientation: Quaternion,
+    #[serde(deserialize_with = "covariance_36")]
     pub covariance: [f64; 36],
+}
+
+/// A `float64[36]` (a fixed array: 36 values, no count).
+fn covariance_36<'de, D: serde::Deserializer<'de>>(d: D) -> Result<[f64; 36], D::Error> {
+    struct Values;
+    impl<'de> serde::de::Visitor<'de> for Values {
+        type Value = [f64; 36];
+        fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            f.write_str("36 float64 values")
+        }
+        fn visit_seq<A: serde::de::SeqAccess<'de>>(
+            self,
+            mut seq: A,
+        ) -> Result<[f64; 36], A::Error> {
+            let mut c = [0.0; 36];
+            for (i, v) in c.iter_mut().enumerate() {
+                *v = seq
+                    .next_element()?
+                    .ok_or_else(|| serde::de::Error::invalid_length(i, &self))?;
+            }
+            Ok(c)
+        }
+    }
+    d.deserialize_tuple(36, Values)
 }
 
 impl Default for PoseWithCovariance {
@@ -438,7 +469,7 @@ impl RosMessage for Odometry {
 
 /// `geometry_msgs/PoseWithCovarianceStamped`: a pose estimate in
 /// `header.frame_id` with its covariance.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
 pub struct PoseWithCovarianceStamped {
     pub header: Header,
     pub pose: PoseWithCovariance,
@@ -462,6 +493,34 @@ impl RosMessage for PoseWithCovarianceStamped {
                 orientation: Quaternion::read(r)?,
                 covariance: read_covariance(r)?,
             },
+        })
+    }
+
+    fn definition() -> String {
+        schema(Self::TYPE)
+    }
+}
+
+/// `geometry_msgs/Twist`: a velocity command (m/s, rad/s), in the base's
+/// frame for `/cmd_vel`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Deserialize)]
+pub struct Twist {
+    pub linear: Vector3,
+    pub angular: Vector3,
+}
+
+impl RosMessage for Twist {
+    const TYPE: &'static str = "geometry_msgs/msg/Twist";
+
+    fn write(&self, w: &mut CdrWriter) {
+        self.linear.write(w);
+        self.angular.write(w);
+    }
+
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        Ok(Twist {
+            linear: Vector3::read(r)?,
+            angular: Vector3::read(r)?,
         })
     }
 

@@ -521,3 +521,53 @@ fn an_independent_dds_subscriber_sees_the_daemon_s_topics() {
         serde_json::json!([["base_link", "laser"]])
     );
 }
+
+/// A ROS 2 teleop on the independent DDS stack drives the robot: with
+/// exploration off, Twist messages on /cmd_vel move the simulated base
+/// through the daemon's limits, and the daemon's /pose follows.
+#[test]
+#[ignore = "needs PyPI cyclonedds; CI runs it: cargo test --test cli -- --ignored"]
+fn cmd_vel_from_an_independent_dds_publisher_drives_the_base() {
+    let dir = TempDir::new("run-ros2-teleop");
+    let domain = 100 + (std::process::id() + 50) % 100;
+    let config = demo_run_config(
+        &dir,
+        &format!("[ros2]\nenabled = true\ndomain_id = {domain}\n"),
+    );
+    let text = std::fs::read_to_string(&config).unwrap();
+    std::fs::write(
+        &config,
+        text.replacen(
+            "[exploration]\nenabled = true",
+            "[exploration]\nenabled = false",
+            1,
+        ),
+    )
+    .unwrap();
+    let mut daemon = Daemon::start(&config);
+    daemon.wait_for("ROS 2 node up", Duration::from_secs(60));
+    daemon.wait_for("first scan localized", Duration::from_secs(60));
+    let python = std::env::var("CLSMAP_PYTHON").unwrap_or_else(|_| "python3".into());
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/ros2_subscriber.py");
+    let out = Command::new(&python)
+        .arg(&script)
+        .args(["--domain", &domain.to_string(), "--timeout", "60"])
+        .args(["--cmd-vel", "0.2", "--drive", "3"])
+        .output()
+        .unwrap();
+    daemon.wait_for("driven by velocity commands", Duration::from_secs(5));
+    daemon.signal("TERM");
+    let (status, _, stderr) = daemon.finish(Duration::from_secs(30));
+    assert!(status.success(), "{status}\n{stderr}");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    let d = &report["driven"];
+    let moved = d["dx"].as_f64().unwrap().hypot(d["dy"].as_f64().unwrap());
+    // 0.2 m/s for 3 s, less the start and the stop.
+    assert!((0.3..0.8).contains(&moved), "moved {moved:.3} m: {report}");
+}
