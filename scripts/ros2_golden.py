@@ -138,6 +138,23 @@ grid = T["nav_msgs/msg/OccupancyGrid"](
 )
 cases.append(("occupancy_grid", grid, "nav_msgs/msg/OccupancyGrid"))
 
+KeyValue = T["diagnostic_msgs/msg/KeyValue"]
+Status = T["diagnostic_msgs/msg/DiagnosticStatus"]
+diag = T["diagnostic_msgs/msg/DiagnosticArray"](
+    header=header(11, 3, ""),
+    status=[
+        Status(
+            level=1,
+            name="clsmap: sensor",
+            message="SENSOR SILENT",
+            hardware_id="/dev/lms200",
+            values=[KeyValue(key="scan rate (Hz)", value="37.5"), KeyValue(key="x", value="")],
+        ),
+        Status(level=0, name="b", message="", hardware_id="", values=[]),
+    ],
+)
+cases.append(("diagnostic_array", diag, "diagnostic_msgs/msg/DiagnosticArray"))
+
 Layout = T["std_msgs/msg/MultiArrayLayout"]
 raw = T["std_msgs/msg/UInt8MultiArray"](
     layout=Layout(dim=[], data_offset=0), data=u8([0x02, 0x80, 0xD6, 0x02, 0xB0])

@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """A ROS 2 subscriber on an independent DDS stack (PyPI `cyclonedds`, no
-ROS installation): subscribes to /scan, /pose, /tf, /tf_static and /map as RViz
-would, with the ROS 2 type names and the message layouts written here from
-the ROS 2 definitions, waits (bounded) for samples on each, and prints one
+ROS installation): subscribes to /scan, /pose, /tf, /tf_static, /map and
+/diagnostics as RViz would, with the ROS 2 type names and the message
+layouts written here from the ROS 2 definitions, waits (bounded) for samples on each, and prints one
 JSON report. /tf_static and /map are read transient-local, so a
 subscriber that joins after they were sent still gets them.
 
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import array, float32, float64, int8, int32, sequence, uint32
+from cyclonedds.idl.types import array, float32, float64, int8, int32, sequence, uint8, uint32
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
@@ -127,6 +127,27 @@ class OccupancyGrid(IdlStruct, typename="nav_msgs::msg::dds_::OccupancyGrid_"):
 
 
 @dataclass
+class KeyValue(IdlStruct, typename="diagnostic_msgs::msg::dds_::KeyValue_"):
+    key: str
+    value: str
+
+
+@dataclass
+class DiagnosticStatus(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticStatus_"):
+    level: uint8
+    name: str
+    message: str
+    hardware_id: str
+    values: sequence[KeyValue]
+
+
+@dataclass
+class DiagnosticArray(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticArray_"):
+    header: Header
+    status: sequence[DiagnosticStatus]
+
+
+@dataclass
 class Twist(IdlStruct, typename="geometry_msgs::msg::dds_::Twist_"):
     linear: Vector3
     angular: Vector3
@@ -175,6 +196,9 @@ def main():
         "/tf": DataReader(dp, Topic(dp, prefix + "tf", TFMessage), qos=reliable),
         "/tf_static": DataReader(dp, Topic(dp, prefix + "tf_static", TFMessage), qos=latched),
         "/map": DataReader(dp, Topic(dp, prefix + "map", OccupancyGrid), qos=latched),
+        "/diagnostics": DataReader(
+            dp, Topic(dp, prefix + "diagnostics", DiagnosticArray), qos=reliable
+        ),
     }
     got = {k: [] for k in readers}
     driver = None
@@ -186,9 +210,9 @@ def main():
     deadline = started + a.timeout
     first_at = {}
     def enough():
-        latched = ("/tf_static", "/map")
-        return all(got[k] for k in latched) and all(
-            len(v) >= 3 for k, v in got.items() if k not in latched
+        once = ("/tf_static", "/map", "/diagnostics")
+        return all(got[k] for k in once) and all(
+            len(v) >= 3 for k, v in got.items() if k not in once
         )
 
     drive_until = None
@@ -254,6 +278,12 @@ def main():
             "free": data.count(0),
             "occupied": data.count(100),
             "unknown": data.count(-1),
+        }
+    if got["/diagnostics"]:
+        d = got["/diagnostics"][-1]
+        report["diagnostics"] = {
+            st.name: {"level": st.level, "message": st.message, "keys": [kv.key for kv in st.values]}
+            for st in d.status
         }
     if driver is not None and drive_until is not None:
         # Let the last commands' motion show in the poses.

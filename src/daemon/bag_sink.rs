@@ -13,7 +13,9 @@ use tracing::{error, info, warn};
 
 use super::ros2_out::{Ros2Message, Stamped, grid_message};
 use crate::ros2::bag::{BagError, BagTopic, BagWriter, Durability};
-use crate::ros2::{LaserScan, OccupancyGrid, Odometry, PoseWithCovarianceStamped, TfMessage};
+use crate::ros2::{
+    DiagnosticArray, LaserScan, OccupancyGrid, Odometry, PoseWithCovarianceStamped, TfMessage,
+};
 
 /// The bag's name in the run's directory.
 pub const BAG_FILE: &str = "run.mcap";
@@ -39,6 +41,7 @@ struct Topics {
     tf: BagTopic<TfMessage>,
     tf_static: BagTopic<TfMessage>,
     map: BagTopic<OccupancyGrid>,
+    diagnostics: BagTopic<DiagnosticArray>,
 }
 
 impl BagSink {
@@ -52,6 +55,7 @@ impl BagSink {
             tf: bag.topic("/tf", Durability::Volatile)?,
             tf_static: bag.topic("/tf_static", Durability::TransientLocal)?,
             map: bag.topic("/map", Durability::TransientLocal)?,
+            diagnostics: bag.topic("/diagnostics", Durability::Volatile)?,
         };
         let (tx, rx) = sync_channel(QUEUE);
         let thread = std::thread::Builder::new()
@@ -118,6 +122,7 @@ fn write_all(mut bag: BagWriter, mut t: Topics, rx: &Receiver<Stamped>) -> Resul
                     Ros2Message::Odometry(m) => bag.write(&mut t.odom, stamp_ns, m.as_ref()),
                     Ros2Message::Tf(m) => bag.write(&mut t.tf, stamp_ns, m),
                     Ros2Message::TfStatic(m) => bag.write(&mut t.tf_static, stamp_ns, m),
+                    Ros2Message::Diagnostics(m) => bag.write(&mut t.diagnostics, stamp_ns, m),
                     Ros2Message::Map(m) => match grid_message(m) {
                         Some(grid) => bag.write(&mut t.map, stamp_ns, &grid),
                         None => Ok(()),

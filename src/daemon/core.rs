@@ -598,6 +598,81 @@ impl Core {
         true
     }
 
+    /// The status line's facts per part, for `/diagnostics`: the sensor,
+    /// the localization and map, and the base (level 0 OK, 1 WARN, 2
+    /// ERROR).
+    fn diagnostics(
+        &self,
+        now: f64,
+        status: &LiveStatus,
+        rate: f64,
+        sensor: &str,
+        latency: &str,
+    ) -> Vec<crate::ros2::DiagnosticStatus> {
+        let kv = |k: &str, v: String| (k.to_string(), v);
+        let part = |name: &str, level: u8, message: String, values| crate::ros2::DiagnosticStatus {
+            level,
+            name: name.into(),
+            message,
+            hardware_id: String::new(),
+            values,
+        };
+        let sensor_level = if self.sensor_ok(now) {
+            0
+        } else if self.last_scan_at.is_none() {
+            1
+        } else {
+            2
+        };
+        let (map_level, map_message) = match status.map_search {
+            None => (0, "localized".to_string()),
+            Some(crate::pipeline::MapSearch::Finding(n)) => {
+                (1, format!("localizing ({n} hypotheses)"))
+            }
+            Some(crate::pipeline::MapSearch::Lost(n)) => (2, format!("lost ({n} hypotheses)")),
+        };
+        let base_ok = self.base.can_drive(now, self.live.last_odometry_time());
+        let command = self.base.last_command();
+        vec![
+            part(
+                "clsmap: sensor",
+                sensor_level,
+                sensor.to_string(),
+                vec![
+                    kv("scan rate (Hz)", format!("{rate:.1}")),
+                    kv("scans skipped", self.skipped.to_string()),
+                    kv("port", self.config.sensor.port.display().to_string()),
+                ],
+            ),
+            part(
+                "clsmap: localization and map",
+                map_level,
+                map_message,
+                vec![
+                    kv("scans", status.scans.to_string()),
+                    kv("localized", status.localized.to_string()),
+                    kv("keyframes", status.keyframes.to_string()),
+                    kv("walls", status.walls.to_string()),
+                    kv("frontiers", status.frontiers.to_string()),
+                    kv("loops closed", status.loops_closed.to_string()),
+                    kv("latency µs p50/p99/max", latency.to_string()),
+                ],
+            ),
+            part(
+                "clsmap: base",
+                if base_ok { 0 } else { 1 },
+                if base_ok { "ok" } else { "cannot drive" }.to_string(),
+                vec![
+                    kv("odometry refused", self.base.odometry_refused().to_string()),
+                    kv(
+                        "command (vx, vy, ω)",
+                        format!("{:.2} {:.2} {:.2}", command.vx, command.vy, command.omega),
+                    ),
+                ],
+            ),
+        ]
+    }
+
     /// The mapper's status; a search for the robot that has run longer
     /// than the base may turn for it counts as lost (the robot waits,
     /// stopped, until a scan or a pose hint settles it).
@@ -623,6 +698,12 @@ impl Core {
         let latency = self.live.latencies().line();
         if !latency.is_empty() {
             info!("latency µs p50/p99/max: {latency}");
+        }
+        if self.ros2.is_some() {
+            let parts = self.diagnostics(now, &status, rate, &sensor, &latency);
+            if let Some(out) = self.ros2.as_mut() {
+                out.diagnostics(now, parts);
+            }
         }
         self.status_due = Some(line);
     }

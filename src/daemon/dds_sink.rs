@@ -27,7 +27,8 @@ use super::config::Ros2Section;
 use super::ros2_out::{Ros2Message, Stamped, grid_message};
 use crate::geometry::Pose2;
 use crate::ros2::{
-    LaserScan, OccupancyGrid, Odometry, PoseWithCovarianceStamped, RosMessage, TfMessage, Twist,
+    DiagnosticArray, LaserScan, OccupancyGrid, Odometry, PoseWithCovarianceStamped, RosMessage,
+    TfMessage, Twist,
 };
 
 /// What the node hears and hands to the loop.
@@ -86,6 +87,7 @@ struct Publishers {
     tf: Publisher<CdrBody>,
     tf_static: Publisher<CdrBody>,
     map: Publisher<CdrBody>,
+    diagnostics: Publisher<CdrBody>,
     cmd_vel: Subscription<Twist>,
     initial_pose: Subscription<PoseWithCovarianceStamped>,
     /// Kept alive while publishing.
@@ -150,6 +152,7 @@ fn start_node(cfg: &Ros2Section) -> Result<Publishers, String> {
     )?;
     let tf_static = publisher("tf_static", TfMessage::TYPE, &latched)?;
     let map = publisher("map", OccupancyGrid::TYPE, &latched)?;
+    let diagnostics = publisher("diagnostics", DiagnosticArray::TYPE, &reliable)?;
     // Best-effort readers match reliable and best-effort writers alike
     // (teleop tools and RViz use either).
     let listen = QosProfile::subscription_default().history(History::KeepLast { depth: 10 });
@@ -168,6 +171,7 @@ fn start_node(cfg: &Ros2Section) -> Result<Publishers, String> {
         .map_err(|e| format!("subscription: {e:?}"))?;
     Ok(Publishers {
         map,
+        diagnostics,
         cmd_vel,
         initial_pose,
         scan,
@@ -207,7 +211,8 @@ impl DdsSink {
             Err(_) => return Err(DdsError::Start("the node's thread ended".into())),
         }
         info!(
-            "ROS 2 node up: publishing /scan /pose /odom /tf /tf_static /map, listening to \
+            "ROS 2 node up: publishing /scan /pose /odom /tf /tf_static /map /diagnostics, \
+             listening to \
              /cmd_vel /initialpose"
         );
         Ok(DdsSink {
@@ -300,6 +305,7 @@ fn publish(p: &Publishers, message: &Ros2Message) -> Result<(), ()> {
         Ros2Message::Odometry(m) => p.odom.publish(body(m.as_ref())),
         Ros2Message::Tf(m) => p.tf.publish(body(m)),
         Ros2Message::TfStatic(m) => p.tf_static.publish(body(m)),
+        Ros2Message::Diagnostics(m) => p.diagnostics.publish(body(m)),
         // Rendered here, off the loop.
         Ros2Message::Map(m) => match grid_message(m) {
             Some(grid) => p.map.publish(body(&grid)),

@@ -18,8 +18,8 @@ use crate::input::bag::laser_scan;
 use crate::input::lms200::lms200_scan_timing;
 use crate::ros2::msg::{PoseWithCovariance, TransformStamped, TwistWithCovariance};
 use crate::ros2::{
-    Header, LaserScan, OccupancyGrid, Odometry, PoseWithCovarianceStamped, Quaternion, TfMessage,
-    Time, Vector3,
+    DiagnosticArray, DiagnosticStatus, Header, LaserScan, OccupancyGrid, Odometry,
+    PoseWithCovarianceStamped, Quaternion, TfMessage, Time, Vector3,
 };
 
 /// REP 105 frame names.
@@ -54,6 +54,8 @@ pub enum Ros2Message {
     Tf(TfMessage),
     /// `/tf_static` (transient-local: a late subscriber still gets it).
     TfStatic(TfMessage),
+    /// `/diagnostics`: the status line's facts, per part.
+    Diagnostics(DiagnosticArray),
     /// `/map` (transient-local): the CLS map as it was, to be rendered as
     /// an occupancy grid by the shell ([`grid_message`]), off the loop.
     Map(MapSnapshot),
@@ -82,6 +84,7 @@ impl Ros2Message {
             Ros2Message::Tf(_) => "/tf",
             Ros2Message::TfStatic(_) => "/tf_static",
             Ros2Message::Map(_) => "/map",
+            Ros2Message::Diagnostics(_) => "/diagnostics",
         }
     }
 }
@@ -164,6 +167,21 @@ impl Ros2Outbox {
     pub fn map_due(&self, version: u64, t: f64) -> bool {
         self.map_sent
             .is_none_or(|(v, at)| v != version && t - at >= MAP_EVERY)
+    }
+
+    /// Queues the health of the parts for `/diagnostics` at `t`.
+    pub fn diagnostics(&mut self, t: f64, status: Vec<DiagnosticStatus>) {
+        let stamp = Time::from_secs(self.epoch + t).unwrap_or_default();
+        self.push(
+            t,
+            Ros2Message::Diagnostics(DiagnosticArray {
+                header: Header {
+                    stamp,
+                    frame_id: String::new(),
+                },
+                status,
+            }),
+        );
     }
 
     /// Queues `map` (at `version`) for `/map` at `t`.

@@ -704,6 +704,36 @@ mod tests {
         ));
     }
 
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+        /// A damaged bag (flipped bytes, a cut) gives messages and errors,
+        /// never a panic; the messages before the damage are intact.
+        #[test]
+        fn a_damaged_bag_never_panics(
+            flips in proptest::collection::vec((0usize..20_000, 1u8..=255), 0..6),
+            cut in 0usize..20_000,
+        ) {
+            let dir = tempfile::tempdir().unwrap();
+            let path = dir.path().join("run.mcap");
+            write_bag(&path, 40);
+            let mut bytes = std::fs::read(&path).unwrap();
+            let len = bytes.len();
+            for (at, x) in flips {
+                bytes[at % len] ^= x;
+            }
+            bytes.truncate(cut.max(8).min(bytes.len()));
+            let damaged = dir.path().join("damaged.mcap");
+            std::fs::write(&damaged, &bytes).unwrap();
+            if let Ok(reader) = BagReader::open(&damaged) {
+                for m in reader.take(1000).flatten() {
+                    if m.topic.topic == "/scan" {
+                        let _ = LaserScan::from_cdr(&m.data);
+                    }
+                }
+            }
+        }
+    }
+
     #[test]
     fn a_directory_s_files_are_read_in_split_order() {
         let dir = tempfile::tempdir().unwrap();

@@ -92,6 +92,16 @@ const FIELDS: &[(&str, &str)] = &[
         "nav_msgs/OccupancyGrid",
         "std_msgs/Header header\nnav_msgs/MapMetaData info\nint8[] data\n",
     ),
+    ("diagnostic_msgs/KeyValue", "string key\nstring value\n"),
+    (
+        "diagnostic_msgs/DiagnosticStatus",
+        "byte level\nstring name\nstring message\nstring hardware_id\n\
+         diagnostic_msgs/KeyValue[] values\n",
+    ),
+    (
+        "diagnostic_msgs/DiagnosticArray",
+        "std_msgs/Header header\ndiagnostic_msgs/DiagnosticStatus[] status\n",
+    ),
     (
         "tf2_msgs/TFMessage",
         "geometry_msgs/TransformStamped[] transforms\n",
@@ -494,6 +504,74 @@ impl RosMessage for PoseWithCovarianceStamped {
                 covariance: read_covariance(r)?,
             },
         })
+    }
+
+    fn definition() -> String {
+        schema(Self::TYPE)
+    }
+}
+
+/// `diagnostic_msgs/DiagnosticStatus`: one part's health (`level` 0 OK,
+/// 1 WARN, 2 ERROR, 3 STALE) and its values.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct DiagnosticStatus {
+    pub level: u8,
+    pub name: String,
+    pub message: String,
+    pub hardware_id: String,
+    pub values: Vec<(String, String)>,
+}
+
+/// `diagnostic_msgs/DiagnosticArray`.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct DiagnosticArray {
+    pub header: Header,
+    pub status: Vec<DiagnosticStatus>,
+}
+
+impl RosMessage for DiagnosticArray {
+    const TYPE: &'static str = "diagnostic_msgs/msg/DiagnosticArray";
+
+    fn write(&self, w: &mut CdrWriter) {
+        self.header.write(w);
+        w.count(self.status.len());
+        for s in &self.status {
+            w.u8(s.level);
+            w.string(&s.name);
+            w.string(&s.message);
+            w.string(&s.hardware_id);
+            w.count(s.values.len());
+            for (k, v) in &s.values {
+                w.string(k);
+                w.string(v);
+            }
+        }
+    }
+
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        let header = Header::read(r)?;
+        // A status is at least a level and three empty strings' lengths.
+        let n = r.count(16)?;
+        let status = (0..n)
+            .map(|_| {
+                let level = r.u8()?;
+                let name = r.string()?;
+                let message = r.string()?;
+                let hardware_id = r.string()?;
+                let k = r.count(8)?;
+                let values = (0..k)
+                    .map(|_| Ok((r.string()?, r.string()?)))
+                    .collect::<Result<_, CdrError>>()?;
+                Ok(DiagnosticStatus {
+                    level,
+                    name,
+                    message,
+                    hardware_id,
+                    values,
+                })
+            })
+            .collect::<Result<_, CdrError>>()?;
+        Ok(DiagnosticArray { header, status })
     }
 
     fn definition() -> String {

@@ -383,6 +383,11 @@ fn run_writes_a_rosbag2_bag_whose_transforms_chain_to_its_poses() {
     assert!(scans > 20, "{counts:?}");
     assert_eq!(counts["/tf_static"], 1, "{counts:?}");
     assert!(counts.get("/map").is_some_and(|&n| n >= 1), "{counts:?}");
+    // The demo's status line comes every second.
+    assert!(
+        counts.get("/diagnostics").is_some_and(|&n| n >= 1),
+        "{counts:?}"
+    );
     for topic in ["/pose", "/tf", "/odom"] {
         assert_eq!(counts[topic], scans, "{topic}: {counts:?}");
     }
@@ -440,6 +445,7 @@ fn an_independent_reader_decodes_every_message_of_the_daemon_s_bag() {
         ("/tf", "tf2_msgs/msg/TFMessage"),
         ("/tf_static", "tf2_msgs/msg/TFMessage"),
         ("/map", "nav_msgs/msg/OccupancyGrid"),
+        ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"),
     ] {
         assert_eq!(report["topics"][topic]["type"], ty, "{report}");
         assert!(

@@ -134,6 +134,29 @@ fn occupancy_grid() -> OccupancyGrid {
     }
 }
 
+fn diagnostic_array() -> DiagnosticArray {
+    DiagnosticArray {
+        header: header(11, 3, ""),
+        status: vec![
+            DiagnosticStatus {
+                level: 1,
+                name: "clsmap: sensor".into(),
+                message: "SENSOR SILENT".into(),
+                hardware_id: "/dev/lms200".into(),
+                values: vec![
+                    ("scan rate (Hz)".into(), "37.5".into()),
+                    ("x".into(), String::new()),
+                ],
+            },
+            DiagnosticStatus {
+                level: 0,
+                name: "b".into(),
+                ..DiagnosticStatus::default()
+            },
+        ],
+    }
+}
+
 fn byte_array() -> ByteArray {
     ByteArray {
         data: vec![0x02, 0x80, 0xD6, 0x02, 0xB0],
@@ -147,6 +170,7 @@ fn messages_match_the_independent_serializer() {
     assert_eq!(tf_message().to_cdr(), golden("tf_message"));
     assert_eq!(byte_array().to_cdr(), golden("byte_array"));
     assert_eq!(occupancy_grid().to_cdr(), golden("occupancy_grid"));
+    assert_eq!(diagnostic_array().to_cdr(), golden("diagnostic_array"));
     assert_eq!(
         pose_with_covariance_stamped().to_cdr(),
         golden("pose_with_covariance_stamped")
