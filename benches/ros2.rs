@@ -34,7 +34,9 @@ fn bench_cdr(c: &mut Criterion) {
     let bytes = msg.to_cdr();
     let mut g = c.benchmark_group("cdr");
     g.throughput(Throughput::Elements(1));
-    g.bench_function("laser_scan_361_encode", |b| b.iter(|| black_box(&msg).to_cdr()));
+    g.bench_function("laser_scan_361_encode", |b| {
+        b.iter(|| black_box(&msg).to_cdr())
+    });
     g.bench_function("laser_scan_361_decode", |b| {
         b.iter(|| LaserScan::from_cdr(black_box(&bytes)))
     });
@@ -45,8 +47,12 @@ fn bench_bag(c: &mut Criterion) {
     let dir = tempfile::tempdir().expect("a temporary directory");
     let path = dir.path().join("csail-size.mcap");
     let mut bag = BagWriter::create(&path).expect("bag");
-    let mut s = bag.topic::<LaserScan>("/scan", Durability::Volatile).expect("topic");
-    let mut o = bag.topic::<Odometry>("/odom", Durability::Volatile).expect("topic");
+    let mut s = bag
+        .topic::<LaserScan>("/scan", Durability::Volatile)
+        .expect("topic");
+    let mut o = bag
+        .topic::<Odometry>("/odom", Durability::Volatile)
+        .expect("topic");
     for k in 0..SCANS {
         let t = 1_134_864_629.9 + 0.2 * k as f64;
         let ns = (t * 1e9) as u64;

@@ -257,6 +257,17 @@ pub fn record(
         .with_context(|| format!("cannot open {}", port.display()))?;
     let mut sinks: Vec<Box<dyn Write + Send>> = Vec::new();
     let mut written = Vec::new();
+    // The bag first: if it cannot be made, no empty recording is left
+    // behind (it would block the retry, files are never overwritten).
+    let mut bag = match outputs.bag {
+        Some(path) => {
+            let bag = RecordBag::create(path, mode)?;
+            sinks.push(Box::new(bag.bytes.clone()));
+            written.push(path.display().to_string());
+            Some(bag)
+        }
+        None => None,
+    };
     if let Some(out) = outputs.recording {
         // Never overwrite a recording: it may be the only copy of a run.
         let file = std::fs::OpenOptions::new()
@@ -272,15 +283,6 @@ pub fn record(
         sinks.push(Box::new(BufWriter::new(file)));
         written.push(out.display().to_string());
     }
-    let mut bag = match outputs.bag {
-        Some(path) => {
-            let bag = RecordBag::create(path, mode)?;
-            sinks.push(Box::new(bag.bytes.clone()));
-            written.push(path.display().to_string());
-            Some(bag)
-        }
-        None => None,
-    };
     let written = written.join(" and ");
     let mut driver = driver.with_recording(Box::new(Tee(sinks)), &note)?;
     let stop = super::stop_flag()?;

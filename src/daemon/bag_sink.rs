@@ -11,11 +11,8 @@ use std::time::{Duration, Instant};
 
 use tracing::{error, info, warn};
 
-use super::ros2_out::{Ros2Message, Stamped, grid_message};
-use crate::ros2::bag::{BagError, BagTopic, BagWriter, Durability};
-use crate::ros2::{
-    DiagnosticArray, LaserScan, OccupancyGrid, Odometry, PoseWithCovarianceStamped, TfMessage,
-};
+use super::ros2_out::{Stamped, TOPICS};
+use crate::ros2::bag::{BagError, BagWriter, Durability, RawTopic};
 
 /// The bag's name in the run's directory.
 pub const BAG_FILE: &str = "run.mcap";
@@ -34,29 +31,21 @@ pub struct BagSink {
     dropped: u64,
 }
 
-struct Topics {
-    scan: BagTopic<LaserScan>,
-    pose: BagTopic<PoseWithCovarianceStamped>,
-    odom: BagTopic<Odometry>,
-    tf: BagTopic<TfMessage>,
-    tf_static: BagTopic<TfMessage>,
-    map: BagTopic<OccupancyGrid>,
-    diagnostics: BagTopic<DiagnosticArray>,
-}
-
 impl BagSink {
     /// Creates `path` (never over an existing file) and starts the writer.
     pub fn start(path: &Path) -> Result<BagSink, BagError> {
         let mut bag = BagWriter::create(path)?;
-        let topics = Topics {
-            scan: bag.topic("/scan", Durability::Volatile)?,
-            pose: bag.topic("/pose", Durability::Volatile)?,
-            odom: bag.topic("/odom", Durability::Volatile)?,
-            tf: bag.topic("/tf", Durability::Volatile)?,
-            tf_static: bag.topic("/tf_static", Durability::TransientLocal)?,
-            map: bag.topic("/map", Durability::TransientLocal)?,
-            diagnostics: bag.topic("/diagnostics", Durability::Volatile)?,
-        };
+        let topics = TOPICS
+            .iter()
+            .map(|t| {
+                let durability = match t.latched {
+                    true => Durability::TransientLocal,
+                    false => Durability::Volatile,
+                };
+                let name = format!("/{}", t.name);
+                bag.raw_topic(&name, t.type_name, &(t.definition)(), durability)
+            })
+            .collect::<Result<Vec<RawTopic>, BagError>>()?;
         let (tx, rx) = sync_channel(QUEUE);
         let thread = std::thread::Builder::new()
             .name("clsmap-bag".into())
@@ -110,23 +99,19 @@ impl BagSink {
     }
 }
 
-fn write_all(mut bag: BagWriter, mut t: Topics, rx: &Receiver<Stamped>) -> Result<u64, BagError> {
+fn write_all(
+    mut bag: BagWriter,
+    mut topics: Vec<RawTopic>,
+    rx: &Receiver<Stamped>,
+) -> Result<u64, BagError> {
     let mut written = 0u64;
     let mut last_flush = Instant::now();
     loop {
         match rx.recv_timeout(FLUSH_EVERY) {
             Ok(Stamped { stamp_ns, message }) => {
-                let result = match &message {
-                    Ros2Message::Scan(m) => bag.write(&mut t.scan, stamp_ns, m),
-                    Ros2Message::Pose(m) => bag.write(&mut t.pose, stamp_ns, m.as_ref()),
-                    Ros2Message::Odometry(m) => bag.write(&mut t.odom, stamp_ns, m.as_ref()),
-                    Ros2Message::Tf(m) => bag.write(&mut t.tf, stamp_ns, m),
-                    Ros2Message::TfStatic(m) => bag.write(&mut t.tf_static, stamp_ns, m),
-                    Ros2Message::Diagnostics(m) => bag.write(&mut t.diagnostics, stamp_ns, m),
-                    Ros2Message::Map(m) => match grid_message(m) {
-                        Some(grid) => bag.write(&mut t.map, stamp_ns, &grid),
-                        None => Ok(()),
-                    },
+                let result = match (message.encode(), topics.get_mut(message.topic_index())) {
+                    (Some(cdr), Some(topic)) => bag.write_raw(topic, stamp_ns, &cdr),
+                    _ => Ok(()),
                 };
                 if let Err(e) = result {
                     error!("the bag stops here: {}", crate::error_chain(&e));

@@ -34,7 +34,8 @@ pub struct DaemonConfig {
 
 /// `[ros2]`: a ROS 2 node on DDS (pure Rust, no ROS installation) that
 /// publishes what the daemon's bag holds: /scan, /pose, /odom, /tf,
-/// /tf_static and /map (frames `map`, `odom`, `base_link`, `laser`, REP
+/// /tf_static, /map and /diagnostics, and listens to /cmd_vel and
+/// /initialpose (frames `map`, `odom`, `base_link`, `laser`, REP
 /// 105).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -358,7 +359,8 @@ pub struct LoopConfig {
     /// says so in STATUS=.
     pub ready_after: f64,
     /// Write a rosbag2 MCAP bag of the run, `run.mcap` in the run's
-    /// directory: /scan, /pose, /odom, /tf, /tf_static and /map, as ROS 2 tools
+    /// directory: /scan, /pose, /odom, /tf, /tf_static, /map and
+    /// /diagnostics, as ROS 2 tools
     /// (Foxglove, `ros2 bag play`, RViz) read them (default false).
     pub bag: bool,
 }

@@ -144,6 +144,8 @@ pub struct Core {
     was_turning: bool,
     /// The last velocity command from ROS 2 (`/cmd_vel`) and when it came.
     teleop: Option<(f64, Twist)>,
+    /// Whether the last control step was driven by it.
+    teleop_driving: bool,
     last_control_at: Option<f64>,
     /// The last pose hint and when it came (s): the same hint again within
     /// [`REPEATED_HINT`] is a bridge repeating itself, not a new one.
@@ -213,6 +215,7 @@ impl Core {
             search_waiting: false,
             was_turning: false,
             teleop: None,
+            teleop_driving: false,
             last_control_at: None,
             last_hint: None,
         }
@@ -347,7 +350,8 @@ impl Core {
     /// A velocity command from outside (ROS 2 `/cmd_vel`, base frame: m/s
     /// forward and left, rad/s) at `now`. It drives the base through the
     /// same limits and stops when exploration is off, for
-    /// [`TELEOP_TIMEOUT`] s; after that the base stops until the next.
+    /// [`TELEOP_TIMEOUT`] s; after that the base is halted until the next
+    /// (and a search for the robot may turn it again).
     /// With exploration on, the explorer drives and commands are ignored.
     pub fn handle_velocity_command(&mut self, now: f64, twist: Twist) {
         if self.live.explorer().is_some() {
@@ -367,17 +371,15 @@ impl Core {
         self.teleop = Some((now, twist));
     }
 
-    /// The command teleoperation gives now, if it drives.
+    /// The command teleoperation gives now, if a fresh one drives; once
+    /// it is older than [`TELEOP_TIMEOUT`] the base is halted (by
+    /// `control`) and left to whatever else drives it.
     fn teleop_command(&self, now: f64) -> Option<Twist> {
         if self.live.explorer().is_some() {
             return None;
         }
         let (at, twist) = self.teleop?;
-        Some(if now - at <= TELEOP_TIMEOUT {
-            twist
-        } else {
-            Twist::ZERO
-        })
+        (now - at <= TELEOP_TIMEOUT).then_some(twist)
     }
 
     /// Odometry and health from the base, and its pose hint if it sent one.
@@ -544,7 +546,13 @@ impl Core {
         // place; one paused from the live view is held.
         let searching = self.follow_search(now, sensor_ok);
         let turning = searching && !self.search_waiting && self.config.map.turn_rate > 0.0;
-        let manual = manual.or_else(|| self.teleop_command(now));
+        let teleop = self.teleop_command(now);
+        if teleop.is_none() && self.teleop_driving {
+            // A teleop that stopped sending stops the robot.
+            self.base.halt(now);
+        }
+        self.teleop_driving = teleop.is_some();
+        let manual = manual.or(teleop);
         let manual = if self.paused {
             self.live.hold_exploration(now);
             Some(Twist::ZERO)
@@ -925,13 +933,13 @@ mod tests {
         };
         c.handle_velocity_command(1.0, t);
         assert_eq!(c.teleop_command(1.0 + TELEOP_TIMEOUT), Some(t));
-        assert_eq!(c.teleop_command(1.01 + TELEOP_TIMEOUT), Some(Twist::ZERO));
-        c.handle_velocity_command(3.0, Twist { vx: f64::NAN, ..t });
         assert_eq!(
-            c.teleop_command(3.0),
-            Some(Twist::ZERO),
-            "not finite: ignored"
+            c.teleop_command(1.01 + TELEOP_TIMEOUT),
+            None,
+            "stale: no longer drives"
         );
+        c.handle_velocity_command(3.0, Twist { vx: f64::NAN, ..t });
+        assert_eq!(c.teleop_command(3.0), None, "not finite: ignored");
     }
 
     #[test]

@@ -24,12 +24,9 @@ use serde::ser::{Serialize, SerializeTuple, Serializer};
 use tracing::{info, warn};
 
 use super::config::Ros2Section;
-use super::ros2_out::{Ros2Message, Stamped, grid_message};
+use super::ros2_out::{Ros2Message, Stamped, TOPICS};
 use crate::geometry::Pose2;
-use crate::ros2::{
-    DiagnosticArray, LaserScan, OccupancyGrid, Odometry, PoseWithCovarianceStamped, RosMessage,
-    TfMessage, Twist,
-};
+use crate::ros2::{PoseWithCovarianceStamped, RosMessage, Twist};
 
 /// What the node hears and hands to the loop.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -73,21 +70,9 @@ impl Serialize for CdrBody {
     }
 }
 
-fn body<M: RosMessage>(m: &M) -> CdrBody {
-    let mut bytes = m.to_cdr();
-    bytes.drain(..4);
-    CdrBody(bytes)
-}
-
-/// The node's publishers.
+/// The node's publishers (in [`TOPICS`] order) and subscriptions.
 struct Publishers {
-    scan: Publisher<CdrBody>,
-    pose: Publisher<CdrBody>,
-    odom: Publisher<CdrBody>,
-    tf: Publisher<CdrBody>,
-    tf_static: Publisher<CdrBody>,
-    map: Publisher<CdrBody>,
-    diagnostics: Publisher<CdrBody>,
+    topics: Vec<Publisher<CdrBody>>,
     cmd_vel: Subscription<Twist>,
     initial_pose: Subscription<PoseWithCovarianceStamped>,
     /// Kept alive while publishing.
@@ -126,33 +111,25 @@ fn start_node(cfg: &Ros2Section) -> Result<Publishers, String> {
                 .start_parameter_services(false),
         )
         .map_err(|e| format!("node: {e:?}"))?;
-    let reliable = QosProfile::publisher_default()
-        .reliability_reliable(WhenFull::Wait(WRITE_WAIT))
-        .durability(Durability::Volatile)
-        .history(History::KeepLast { depth: 10 });
-    let latched = reliable
-        .clone()
-        .durability(Durability::TransientLocal)
-        .history(History::KeepLast { depth: 1 });
-    let mut publisher = |topic: &str, ty: &str, qos: &QosProfile| {
-        let name = Name::new(namespace, topic).map_err(|e| format!("topic {topic}: {e:?}"))?;
+    let mut topics = Vec::with_capacity(TOPICS.len());
+    for t in &TOPICS {
+        let qos = QosProfile::publisher_default()
+            .reliability_reliable(WhenFull::Wait(WRITE_WAIT))
+            .durability(if t.latched {
+                Durability::TransientLocal
+            } else {
+                Durability::Volatile
+            })
+            .history(History::KeepLast { depth: t.depth });
+        let name = Name::new(namespace, t.name).map_err(|e| format!("topic {}: {e:?}", t.name))?;
         let topic = node
-            .create_topic(&name, type_name(ty), qos)
-            .map_err(|e| format!("topic {topic}: {e:?}"))?;
-        node.create_publisher::<CdrBody>(&topic, Some(qos.clone()))
-            .map_err(|e| format!("publisher: {e:?}"))
-    };
-    let scan = publisher("scan", LaserScan::TYPE, &reliable)?;
-    let pose = publisher("pose", PoseWithCovarianceStamped::TYPE, &reliable)?;
-    let odom = publisher("odom", Odometry::TYPE, &reliable)?;
-    let tf = publisher(
-        "tf",
-        TfMessage::TYPE,
-        &reliable.clone().history(History::KeepLast { depth: 100 }),
-    )?;
-    let tf_static = publisher("tf_static", TfMessage::TYPE, &latched)?;
-    let map = publisher("map", OccupancyGrid::TYPE, &latched)?;
-    let diagnostics = publisher("diagnostics", DiagnosticArray::TYPE, &reliable)?;
+            .create_topic(&name, type_name(t.type_name), &qos)
+            .map_err(|e| format!("topic {}: {e:?}", t.name))?;
+        topics.push(
+            node.create_publisher::<CdrBody>(&topic, Some(qos))
+                .map_err(|e| format!("publisher: {e:?}"))?,
+        );
+    }
     // Best-effort readers match reliable and best-effort writers alike
     // (teleop tools and RViz use either).
     let listen = QosProfile::subscription_default().history(History::KeepLast { depth: 10 });
@@ -170,15 +147,9 @@ fn start_node(cfg: &Ros2Section) -> Result<Publishers, String> {
         .create_subscription::<PoseWithCovarianceStamped>(&initial_pose_topic, Some(listen))
         .map_err(|e| format!("subscription: {e:?}"))?;
     Ok(Publishers {
-        map,
-        diagnostics,
+        topics,
         cmd_vel,
         initial_pose,
-        scan,
-        pose,
-        odom,
-        tf,
-        tf_static,
         _node: node,
     })
 }
@@ -299,18 +270,11 @@ fn run_node(
 }
 
 fn publish(p: &Publishers, message: &Ros2Message) -> Result<(), ()> {
-    let result = match message {
-        Ros2Message::Scan(m) => p.scan.publish(body(m)),
-        Ros2Message::Pose(m) => p.pose.publish(body(m.as_ref())),
-        Ros2Message::Odometry(m) => p.odom.publish(body(m.as_ref())),
-        Ros2Message::Tf(m) => p.tf.publish(body(m)),
-        Ros2Message::TfStatic(m) => p.tf_static.publish(body(m)),
-        Ros2Message::Diagnostics(m) => p.diagnostics.publish(body(m)),
-        // Rendered here, off the loop.
-        Ros2Message::Map(m) => match grid_message(m) {
-            Some(grid) => p.map.publish(body(&grid)),
-            None => Ok(()),
-        },
+    // Rendered (a map's grid) and encoded here, off the loop.
+    let (Some(mut cdr), Some(publisher)) = (message.encode(), p.topics.get(message.topic_index()))
+    else {
+        return Ok(());
     };
-    result.map_err(|_| ())
+    cdr.drain(..4);
+    publisher.publish(CdrBody(cdr)).map_err(|_| ())
 }

@@ -19,7 +19,7 @@ use crate::input::lms200::lms200_scan_timing;
 use crate::ros2::msg::{PoseWithCovariance, TransformStamped, TwistWithCovariance};
 use crate::ros2::{
     DiagnosticArray, DiagnosticStatus, Header, LaserScan, OccupancyGrid, Odometry,
-    PoseWithCovarianceStamped, Quaternion, TfMessage, Time, Vector3,
+    PoseWithCovarianceStamped, Quaternion, RosMessage, TfMessage, Time, Vector3,
 };
 
 /// REP 105 frame names.
@@ -74,18 +74,70 @@ impl PartialEq for MapSnapshot {
     }
 }
 
+/// A topic the daemon publishes: its name (below the namespace), ROS
+/// type and schema, whether it is latched (transient-local: a late
+/// subscriber gets the last message) and how many messages a writer keeps.
+#[derive(Debug, Clone, Copy)]
+pub struct Ros2Topic {
+    pub name: &'static str,
+    pub type_name: &'static str,
+    pub definition: fn() -> String,
+    pub latched: bool,
+    pub depth: usize,
+}
+
+/// Every topic, in [`Ros2Message::topic_index`] order: the one table the
+/// bag and the DDS node are built from.
+pub const TOPICS: [Ros2Topic; 7] = [
+    topic::<LaserScan>("scan", false, 10),
+    topic::<PoseWithCovarianceStamped>("pose", false, 10),
+    topic::<Odometry>("odom", false, 10),
+    topic::<TfMessage>("tf", false, 100),
+    topic::<TfMessage>("tf_static", true, 1),
+    topic::<OccupancyGrid>("map", true, 1),
+    topic::<DiagnosticArray>("diagnostics", false, 10),
+];
+
+const fn topic<M: RosMessage>(name: &'static str, latched: bool, depth: usize) -> Ros2Topic {
+    Ros2Topic {
+        name,
+        type_name: M::TYPE,
+        definition: M::definition,
+        latched,
+        depth,
+    }
+}
+
 impl Ros2Message {
-    /// The topic it goes on.
-    pub fn topic(&self) -> &'static str {
+    /// Its topic's place in [`TOPICS`].
+    pub fn topic_index(&self) -> usize {
         match self {
-            Ros2Message::Scan(_) => "/scan",
-            Ros2Message::Pose(_) => "/pose",
-            Ros2Message::Odometry(_) => "/odom",
-            Ros2Message::Tf(_) => "/tf",
-            Ros2Message::TfStatic(_) => "/tf_static",
-            Ros2Message::Map(_) => "/map",
-            Ros2Message::Diagnostics(_) => "/diagnostics",
+            Ros2Message::Scan(_) => 0,
+            Ros2Message::Pose(_) => 1,
+            Ros2Message::Odometry(_) => 2,
+            Ros2Message::Tf(_) => 3,
+            Ros2Message::TfStatic(_) => 4,
+            Ros2Message::Map(_) => 5,
+            Ros2Message::Diagnostics(_) => 6,
         }
+    }
+
+    /// The topic it goes on (`/scan`, …).
+    pub fn topic(&self) -> String {
+        format!("/{}", TOPICS[self.topic_index()].name)
+    }
+
+    /// Its CDR bytes (header included); a map is rendered as its grid here,
+    /// so a shell calls this off the loop. `None` for an empty map.
+    pub fn encode(&self) -> Option<Vec<u8>> {
+        Some(match self {
+            Ros2Message::Scan(m) => m.to_cdr(),
+            Ros2Message::Pose(m) => m.to_cdr(),
+            Ros2Message::Odometry(m) => m.to_cdr(),
+            Ros2Message::Tf(m) | Ros2Message::TfStatic(m) => m.to_cdr(),
+            Ros2Message::Diagnostics(m) => m.to_cdr(),
+            Ros2Message::Map(m) => grid_message(m)?.to_cdr(),
+        })
     }
 }
 
@@ -109,6 +161,8 @@ pub struct Ros2Outbox {
     dropped: u64,
     /// What the last `/map` was taken of, and when (daemon clock, s).
     map_sent: Option<(u64, f64)>,
+    /// Whether any scan came with odometry (a base is there).
+    had_odometry: bool,
 }
 
 /// A pose as a ROS transform of `child` in `parent` at `stamp`.
@@ -158,6 +212,7 @@ impl Ros2Outbox {
             static_sent: false,
             dropped: 0,
             map_sent: None,
+            had_odometry: false,
         }
     }
 
@@ -249,8 +304,13 @@ impl Ros2Outbox {
                 },
             })),
         );
-        // map → odom so that map → odom → base_link is the pose; without
-        // odometry, odom is base_link.
+        // map → odom so that map → odom → base_link is the pose; without a
+        // base, odom is base_link. A scan whose odometry is missing while
+        // a base is there gets no transforms: odom must not jump (REP 105).
+        self.had_odometry |= odometry.is_some();
+        if odometry.is_none() && self.had_odometry {
+            return;
+        }
         let odom = odometry.unwrap_or(Pose2::IDENTITY);
         let map_to_odom = pose.compose(&odom.inverse());
         let transforms = vec![
@@ -370,7 +430,7 @@ mod tests {
         out.scan(&scan(5.0), pose, &cov, Some(odom));
         out.scan(&scan(5.1), pose, &cov, None);
         let all = out.take();
-        let topics: Vec<&str> = all.iter().map(|m| m.message.topic()).collect();
+        let topics: Vec<String> = all.iter().map(|m| m.message.topic()).collect();
         assert_eq!(
             topics,
             [
@@ -380,9 +440,10 @@ mod tests {
                 "/tf",
                 "/odom",
                 "/scan",
-                "/pose",
-                "/tf"
-            ]
+                "/pose"
+            ],
+            "the second scan has no odometry while a base is there: no transforms, \
+             so odom does not jump"
         );
         let Ros2Message::Tf(tf) = &all[3].message else {
             panic!()

@@ -477,32 +477,6 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
                     let t = slot.scan.timestamp.saturating_duration_since(t0).as_secs_f64();
                     let queued = slot.scan.received_at.elapsed();
                     let outcome = core.handle_scan(now, t, &slot.scan.scan, Some(queued));
-                    let messages = core.poll_ros2();
-                    #[cfg(feature = "dds")]
-                    if let Some(node) = dds.as_mut() {
-                        node.send(&messages);
-                    }
-                    if write_bag && !messages.is_empty() && !bag_failed {
-                        if bag.is_none() {
-                            let started = dirs
-                                .out_dir()
-                                .map_err(|e| e.to_string())
-                                .and_then(|d| {
-                                    BagSink::start(&d.join(BAG_FILE))
-                                        .map_err(|e| crate::error_chain(&e))
-                                });
-                            match started {
-                                Ok(sink) => bag = Some(sink),
-                                Err(e) => {
-                                    error!("no bag of this run: {e}");
-                                    bag_failed = true;
-                                }
-                            }
-                        }
-                        if let Some(sink) = bag.as_mut() {
-                            sink.send(messages);
-                        }
-                    }
                     if let (Some(outcome), Some(hook)) = (outcome, on_scan.as_mut()) {
                         hook(&ScanProgress {
                             t: now,
@@ -550,6 +524,32 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
                 writing = None;
                 checkpoint_done(&mut core, result);
             }
+        }
+        // What the core built for ROS 2 (scans, and at each status tick
+        // the diagnostics, also while the sensor is silent).
+        let messages = core.poll_ros2();
+        #[cfg(feature = "dds")]
+        if let Some(node) = dds.as_mut() {
+            node.send(&messages);
+        }
+        // The bag (and with it the run's directory) starts with a scan.
+        let has_scan = messages
+            .iter()
+            .any(|m| matches!(m.message, super::ros2_out::Ros2Message::Scan(_)));
+        if write_bag && bag.is_none() && has_scan && !bag_failed {
+            let started = dirs.out_dir().map_err(|e| e.to_string()).and_then(|d| {
+                BagSink::start(&d.join(BAG_FILE)).map_err(|e| crate::error_chain(&e))
+            });
+            match started {
+                Ok(sink) => bag = Some(sink),
+                Err(e) => {
+                    error!("no bag of this run: {e}");
+                    bag_failed = true;
+                }
+            }
+        }
+        if let Some(sink) = bag.as_mut() {
+            sink.send(messages);
         }
         if core.poll_ready() {
             notifier.ready();

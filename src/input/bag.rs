@@ -151,9 +151,9 @@ impl BagScans {
         }
         let odometry = self.odometry.at(scan.t);
         let scan = self.pending.pop_front()?;
-        if let Some(next) = self.pending.front() {
-            self.odometry.discard_before(next.t);
-        }
+        // Later scans are later (earlier ones are refused): samples before
+        // this one's are not needed again.
+        self.odometry.discard_before(scan.t);
         Some(ScanRecord { scan, odometry })
     }
 
@@ -184,14 +184,12 @@ impl BagScans {
                     topic: odom_topic.into(),
                     type_name: odom_type,
                     available: format!(
-                        "none in the first {MAX_SCANS_WITHOUT_ODOMETRY} scans (the bag has no \
-                         summary){HINT}"
+                        "no odometry from it in the first {MAX_SCANS_WITHOUT_ODOMETRY} scans{HINT}"
                     ),
                 });
             }
         } else if !odom_topic.is_empty() && m.topic.topic == odom_topic {
             check_type(&m.topic, odom_type)?;
-            self.seen[1] = true;
             let at = format!("{} message at {} ns", m.topic.topic, m.log_time);
             let odometry = |error| InputError::BagOdometry {
                 at: at.clone(),
@@ -203,8 +201,9 @@ impl BagScans {
                     let p = &o.pose;
                     let pose = Pose2::new(p.position.x, p.position.y, p.orientation.yaw());
                     self.odometry
-                        .push(o.header.stamp.as_secs(), pose)
+                        .push(seconds(&o.header.stamp), pose)
                         .map_err(odometry)?;
+                    self.seen[1] = true;
                 }
                 BagOdometry::None => {}
                 BagOdometry::Tf { parent, child } => {
@@ -215,8 +214,11 @@ impl BagScans {
                     }) {
                         let pose = Pose2::new(t.translation.x, t.translation.y, t.rotation.yaw());
                         self.odometry
-                            .push(t.header.stamp.as_secs(), pose)
+                            .push(seconds(&t.header.stamp), pose)
                             .map_err(odometry)?;
+                        // Seen only when a transform of the frames asked
+                        // for came: other /tf traffic is no odometry.
+                        self.seen[1] = true;
                     }
                 }
             }
@@ -229,10 +231,16 @@ impl BagScans {
         let wanted = self.topics.wanted();
         let k = self.seen.iter().position(|s| !s)?;
         let (topic, type_name) = wanted[k];
+        let available = match &self.topics.odometry {
+            BagOdometry::Tf { parent, child } if k == 1 => {
+                format!("no transform of {child} in {parent} in the whole bag{HINT}")
+            }
+            _ => format!("no message of it in the whole bag{HINT}"),
+        };
         Some(InputError::MissingTopic {
             topic: topic.into(),
             type_name,
-            available: format!("no message of it in the whole bag{HINT}"),
+            available,
         })
     }
 }
@@ -577,6 +585,24 @@ mod tests {
             nanosec: 123_456_000,
         };
         assert_eq!(seconds(&t), 1_100_000_000.123_456);
+    }
+
+    #[test]
+    fn tf_between_frames_the_bag_lacks_is_named_not_mapped_without_odometry() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("b.mcap");
+        bag(&path, 5);
+        let topics = BagTopics {
+            odometry: BagOdometry::Tf {
+                parent: "odom".into(),
+                child: "base_footprint".into(),
+            },
+            ..BagTopics::default()
+        };
+        let items: Vec<_> = BagScans::open(&path, topics).unwrap().collect();
+        assert_eq!(items.len(), 1, "{items:?}");
+        let e = items[0].as_ref().unwrap_err().to_string();
+        assert!(e.contains("no transform of base_footprint in odom"), "{e}");
     }
 
     #[test]

@@ -322,9 +322,9 @@ impl<R: BufRead> CarmenScans<R> {
             }
         };
         let (scan, _) = self.pending.pop_front()?;
-        if let Some(next) = self.pending.front() {
-            self.odometry.discard_before(next.0.t);
-        }
+        // Later scans are later (earlier ones are refused): samples before
+        // this one's are not needed again.
+        self.odometry.discard_before(scan.t);
         Some(ScanRecord { scan, odometry })
     }
 

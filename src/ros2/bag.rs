@@ -130,11 +130,18 @@ impl Durability {
     }
 }
 
+/// A topic added to a [`BagWriter`], of any type ([`BagTopic`] is the
+/// typed form).
+#[derive(Debug)]
+pub struct RawTopic {
+    channel: u16,
+    sequence: u32,
+}
+
 /// A topic added to a [`BagWriter`], typed by its message.
 #[derive(Debug)]
 pub struct BagTopic<M> {
-    channel: u16,
-    sequence: u32,
+    raw: RawTopic,
     _message: PhantomData<M>,
 }
 
@@ -142,7 +149,7 @@ pub struct BagTopic<M> {
 pub struct BagWriter {
     mcap: mcap::Writer<BufWriter<File>>,
     path: PathBuf,
-    schemas: HashMap<&'static str, u16>,
+    schemas: HashMap<String, u16>,
 }
 
 impl std::fmt::Debug for BagWriter {
@@ -193,14 +200,29 @@ impl BagWriter {
         name: &str,
         durability: Durability,
     ) -> Result<BagTopic<M>, BagError> {
-        let schema = match self.schemas.get(M::TYPE) {
+        Ok(BagTopic {
+            raw: self.raw_topic(name, M::TYPE, &M::definition(), durability)?,
+            _message: PhantomData,
+        })
+    }
+
+    /// Adds a topic of type `type_name` (`pkg/msg/Type`) whose schema is
+    /// `definition` (`ros2msg`).
+    pub fn raw_topic(
+        &mut self,
+        name: &str,
+        type_name: &str,
+        definition: &str,
+        durability: Durability,
+    ) -> Result<RawTopic, BagError> {
+        let schema = match self.schemas.get(type_name) {
             Some(&id) => id,
             None => {
                 let id = self
                     .mcap
-                    .add_schema(M::TYPE, "ros2msg", M::definition().as_bytes())
+                    .add_schema(type_name, "ros2msg", definition.as_bytes())
                     .map_err(|e| self.write_error(e))?;
-                self.schemas.insert(M::TYPE, id);
+                self.schemas.insert(type_name.to_string(), id);
                 id
             }
         };
@@ -210,10 +232,9 @@ impl BagWriter {
             .mcap
             .add_channel(schema, name, "cdr", &metadata)
             .map_err(|e| self.write_error(e))?;
-        Ok(BagTopic {
+        Ok(RawTopic {
             channel,
             sequence: 0,
-            _message: PhantomData,
         })
     }
 
@@ -225,6 +246,16 @@ impl BagWriter {
         log_time: u64,
         message: &M,
     ) -> Result<(), BagError> {
+        self.write_raw(&mut topic.raw, log_time, &message.to_cdr())
+    }
+
+    /// Writes a serialized message (CDR, header included) on `topic`.
+    pub fn write_raw(
+        &mut self,
+        topic: &mut RawTopic,
+        log_time: u64,
+        cdr: &[u8],
+    ) -> Result<(), BagError> {
         topic.sequence = topic.sequence.wrapping_add(1);
         let header = MessageHeader {
             channel_id: topic.channel,
@@ -233,7 +264,7 @@ impl BagWriter {
             publish_time: log_time,
         };
         self.mcap
-            .write_to_known_channel(&header, &message.to_cdr())
+            .write_to_known_channel(&header, cdr)
             .map_err(|e| self.write_error(e))
     }
 
