@@ -8,6 +8,7 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, bail};
+use clsmap::daemon::ros2_out::LASER_FRAME;
 use clsmap::input::bag::laser_scan;
 use clsmap::input::lms200::{
     lms200_reach, lms200_scan_timing, note_mode, range_scan, scan_time_us, seconds,
@@ -193,7 +194,7 @@ impl RecordBag {
             if let Some(rs) = range_scan(&ts.scan, t, self.mode) {
                 let (time_increment, scan_time) = lms200_scan_timing(rs.angle_increment);
                 let reach = lms200_reach(ts.units);
-                let msg = laser_scan(&rs, "laser", reach, time_increment, scan_time);
+                let msg = laser_scan(&rs, LASER_FRAME, reach, time_increment, scan_time);
                 self.writer.write(&mut self.scan, (t * 1e9) as u64, &msg)?;
             }
         }
