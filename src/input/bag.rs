@@ -13,7 +13,6 @@
 //! `range_min` a reading the sensor flagged.
 
 use std::cell::Cell;
-use std::collections::VecDeque;
 use std::path::Path;
 use std::rc::Rc;
 
@@ -21,7 +20,8 @@ use crate::geometry::{BeamFault, Pose2, RangeScan};
 use crate::ros2::bag::{BagMessage, BagReader, TopicInfo};
 use crate::ros2::{LaserScan, Odometry, RosMessage, TfMessage};
 
-use super::{InputError, OdometryTrack, ScanRecord};
+use super::odometry::ScansAwaitingOdometry;
+use super::{InputError, ScanRecord};
 
 /// Where the odometry of a bag comes from.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -89,8 +89,7 @@ fn frame(name: &str) -> &str {
 pub struct BagScans {
     reader: BagReader,
     topics: BagTopics,
-    pending: VecDeque<RangeScan>,
-    odometry: OdometryTrack,
+    pending: ScansAwaitingOdometry,
     /// Messages of the two topics seen (without a summary, how a missing
     /// topic is found).
     seen: [bool; 2],
@@ -126,8 +125,7 @@ impl BagScans {
         Ok(BagScans {
             reader,
             topics,
-            pending: VecDeque::new(),
-            odometry: OdometryTrack::new(),
+            pending: ScansAwaitingOdometry::default(),
             seen: [false, no_odometry],
             finished: false,
             last_scan_t: None,
@@ -140,21 +138,6 @@ impl BagScans {
     pub fn with_progress(mut self, cell: Rc<Cell<u64>>) -> Self {
         self.progress = Some(cell);
         self
-    }
-
-    fn ready(&mut self) -> Option<ScanRecord> {
-        let scan = self.pending.front()?;
-        let resolved = self.topics.odometry == BagOdometry::None
-            || self.odometry.last_time().is_some_and(|last| last >= scan.t);
-        if !resolved && !self.finished {
-            return None;
-        }
-        let odometry = self.odometry.at(scan.t);
-        let scan = self.pending.pop_front()?;
-        // Later scans are later (earlier ones are refused): samples before
-        // this one's are not needed again.
-        self.odometry.discard_before(scan.t);
-        Some(ScanRecord { scan, odometry })
     }
 
     /// Takes one message into the queue or the odometry track.
@@ -178,8 +161,8 @@ impl BagScans {
                 });
             }
             self.last_scan_t = Some(scan.t);
-            self.pending.push_back(scan);
-            if !self.seen[1] && self.pending.len() > MAX_SCANS_WITHOUT_ODOMETRY {
+            self.pending.push_scan(scan, None);
+            if !self.seen[1] && self.pending.waiting() > MAX_SCANS_WITHOUT_ODOMETRY {
                 return Err(InputError::MissingTopic {
                     topic: odom_topic.into(),
                     type_name: odom_type,
@@ -200,8 +183,8 @@ impl BagScans {
                     let o = Odometry::from_cdr(&m.data).map_err(skipped)?;
                     let p = &o.pose;
                     let pose = Pose2::new(p.position.x, p.position.y, p.orientation.yaw());
-                    self.odometry
-                        .push(seconds(&o.header.stamp), pose)
+                    self.pending
+                        .push_odometry(seconds(&o.header.stamp), pose)
                         .map_err(odometry)?;
                     self.seen[1] = true;
                 }
@@ -213,8 +196,8 @@ impl BagScans {
                             && frame(&t.child_frame_id) == frame(child)
                     }) {
                         let pose = Pose2::new(t.translation.x, t.translation.y, t.rotation.yaw());
-                        self.odometry
-                            .push(seconds(&t.header.stamp), pose)
+                        self.pending
+                            .push_odometry(seconds(&t.header.stamp), pose)
                             .map_err(odometry)?;
                         // Seen only when a transform of the frames asked
                         // for came: other /tf traffic is no odometry.
@@ -250,7 +233,9 @@ impl Iterator for BagScans {
 
     fn next(&mut self) -> Option<Self::Item> {
         loop {
-            if let Some(record) = self.ready() {
+            // Without odometry to wait for, every scan is ready.
+            let complete = self.finished || self.topics.odometry == BagOdometry::None;
+            if let Some(record) = self.pending.pop(complete) {
                 return Some(Ok(record));
             }
             if self.finished {

@@ -20,10 +20,9 @@
 //! pose: their odometry is interpolated from the ODOM lines around them.
 //! Comments (`#`), blank lines and other record types are skipped.
 
-use super::odometry::OdometryTrack;
+use super::odometry::ScansAwaitingOdometry;
 use super::{InputError, ScanRecord};
 use crate::geometry::{BeamFault, Pose2, RangeScan};
-use std::collections::VecDeque;
 use std::f64::consts::PI;
 use std::io::BufRead;
 use thiserror::Error;
@@ -287,9 +286,8 @@ pub struct CarmenScans<R> {
     reader: R,
     line_no: usize,
     buf: Vec<u8>,
-    /// Scans read but not yet yielded; `None` odometry = still to interpolate.
-    pending: VecDeque<(RangeScan, Option<Pose2>)>,
-    odometry: OdometryTrack,
+    /// Scans read but not yet yielded, and the odometry they wait for.
+    pending: ScansAwaitingOdometry,
     finished: bool,
     /// Time of the last scan queued, to skip scans out of time order.
     last_scan_t: Option<f64>,
@@ -301,31 +299,10 @@ impl<R: BufRead> CarmenScans<R> {
             reader,
             line_no: 0,
             buf: Vec::new(),
-            pending: VecDeque::new(),
-            odometry: OdometryTrack::new(),
+            pending: ScansAwaitingOdometry::default(),
             finished: false,
             last_scan_t: None,
         }
-    }
-
-    /// The front scan, if it can be yielded now.
-    fn ready(&mut self) -> Option<ScanRecord> {
-        let (scan, own) = self.pending.front()?;
-        let odometry = match own {
-            Some(p) => Some(*p),
-            None => {
-                let resolved = self.odometry.last_time().is_some_and(|last| last >= scan.t);
-                if !resolved && !self.finished {
-                    return None;
-                }
-                self.odometry.at(scan.t)
-            }
-        };
-        let (scan, _) = self.pending.pop_front()?;
-        // Later scans are later (earlier ones are refused): samples before
-        // this one's are not needed again.
-        self.odometry.discard_before(scan.t);
-        Some(ScanRecord { scan, odometry })
     }
 
     /// Reads one line into the pending queue or the odometry track.
@@ -358,11 +335,11 @@ impl<R: BufRead> CarmenScans<R> {
                     });
                 }
                 self.last_scan_t = Some(scan.t);
-                self.pending.push_back((scan, odometry));
+                self.pending.push_scan(scan, odometry);
             }
             Some(CarmenEntry::Odometry { t, pose }) => self
-                .odometry
-                .push(t, pose)
+                .pending
+                .push_odometry(t, pose)
                 .map_err(|error| InputError::Odometry { line, error })?,
             None => {}
         }
@@ -375,7 +352,7 @@ impl<R: BufRead> Iterator for CarmenScans<R> {
 
     fn next(&mut self) -> Option<Self::Item> {
         loop {
-            if let Some(record) = self.ready() {
+            if let Some(record) = self.pending.pop(self.finished) {
                 return Some(Ok(record));
             }
             if self.finished {

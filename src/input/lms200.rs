@@ -14,7 +14,7 @@ use lms200::{
 
 use super::{InputError, ScanRecord};
 use crate::geometry::{BeamFault, Pose2, RangeScan};
-use crate::input::odometry::OdometryTrack;
+use crate::input::odometry::ScansAwaitingOdometry;
 
 /// The variant a complete scan was taken with, from its number of values.
 /// Partial (interlaced) scans have none.
@@ -129,8 +129,8 @@ pub struct RecordingScans<R: Read> {
     decoder: Decoder,
     mode: MeasuringMode,
     baud: Baud,
-    odometry: OdometryTrack,
-    waiting: VecDeque<RangeScan>,
+    /// Scans decoded, waiting for the odometry at their time.
+    waiting: ScansAwaitingOdometry,
     /// Skipped items to report before the next scan.
     skipped: VecDeque<InputError>,
     /// What ended the recording, yielded after its last scan.
@@ -148,8 +148,7 @@ impl<R: Read> RecordingScans<R> {
             decoder: Decoder::new(),
             mode: MeasuringMode::Bits13FieldsAbDazzle,
             baud: Baud::B9600,
-            odometry: OdometryTrack::new(),
-            waiting: VecDeque::new(),
+            waiting: ScansAwaitingOdometry::default(),
             skipped: VecDeque::new(),
             error: None,
             last_scan_t: None,
@@ -163,13 +162,13 @@ impl<R: Read> RecordingScans<R> {
         s.bad_crc + s.impossible_length + s.length_mismatch + s.implausible + s.truncated
     }
 
-    fn ready(&self, t: f64) -> bool {
+    /// Whether no more odometry will come for the scans waiting: the
+    /// file ended, or none came after this many scans (the recording has
+    /// none, as `clsmap record` makes them; the file is not held in
+    /// memory waiting for it).
+    fn odometry_complete(&self) -> bool {
         self.ended
-            || self.odometry.last_time().is_some_and(|last| last >= t)
-            // No odometry yet after this many scans: the recording has
-            // none (as `clsmap record` makes them); do not hold the whole
-            // file in memory waiting for it.
-            || (self.odometry.is_empty() && self.waiting.len() > MAX_SCANS_WITHOUT_ODOMETRY)
+            || (!self.waiting.has_odometry() && self.waiting.waiting() > MAX_SCANS_WITHOUT_ODOMETRY)
     }
 
     fn read_record(&mut self) {
@@ -199,8 +198,7 @@ impl<R: Read> RecordingScans<R> {
                         {
                             let t = seconds(scan_time_us(t_us, &scan, baud));
                             if let Some(rs) = range_scan(&scan, t, mode) {
-                                let previous = waiting.back().map(|w| w.t).or(*last_scan_t);
-                                match previous.filter(|&p| rs.t <= p) {
+                                match last_scan_t.filter(|&p| rs.t <= p) {
                                     Some(previous) => {
                                         skipped.push_back(InputError::ScanOutOfOrder {
                                             at: format!("recording byte {offset}"),
@@ -210,7 +208,7 @@ impl<R: Read> RecordingScans<R> {
                                     }
                                     None => {
                                         *last_scan_t = Some(rs.t);
-                                        waiting.push_back(rs);
+                                        waiting.push_scan(rs, None);
                                     }
                                 }
                             }
@@ -230,7 +228,7 @@ impl<R: Read> RecordingScans<R> {
                 Record::Odometry { t_us, x, y, theta } => {
                     let t = seconds(t_us);
                     // A bad sample is skipped and reported; the track goes on.
-                    if let Err(error) = self.odometry.push(t, Pose2::new(x, y, theta)) {
+                    if let Err(error) = self.waiting.push_odometry(t, Pose2::new(x, y, theta)) {
                         self.skipped.push_back(InputError::RecordingOdometry {
                             offset: self.records.offset(),
                             error,
@@ -251,13 +249,9 @@ impl<R: Read> Iterator for RecordingScans<R> {
             if let Some(e) = self.skipped.pop_front() {
                 return Some(Err(e));
             }
-            if let Some(t) = self.waiting.front().map(|s| s.t) {
-                if self.ready(t) {
-                    let scan = self.waiting.pop_front()?;
-                    let odometry = self.odometry.at(scan.t);
-                    // Keep one sample before the scan for the next interpolation.
-                    self.odometry.discard_before(scan.t);
-                    return Some(Ok(ScanRecord { scan, odometry }));
+            if self.waiting.waiting() > 0 {
+                if let Some(record) = self.waiting.pop(self.odometry_complete()) {
+                    return Some(Ok(record));
                 }
             } else if self.ended {
                 return self.error.take().map(Err);

@@ -6,8 +6,12 @@
 //! exact for a constant-velocity straight or turning-in-place motion and
 //! within a few millimetres for the 10–50 Hz odometry rates of real bases.
 
-use crate::geometry::Pose2;
+use std::collections::VecDeque;
+
+use crate::geometry::{Pose2, RangeScan};
 use thiserror::Error;
+
+use super::ScanRecord;
 
 /// One odometry reading of a track: time (s) and pose in the odometry
 /// frame (m, rad). (A base's own readings are `clsmap_base::OdometrySample`.)
@@ -109,6 +113,65 @@ impl OdometryTrack {
         if after > 1 {
             self.samples.drain(..after - 1);
         }
+    }
+}
+
+/// Scans held until the odometry reaches their time, then given out in
+/// order with the odometry interpolated there (or with the pose their own
+/// record carried). Memory stays bounded by the scans between two
+/// odometry samples; samples older than the scan given out are dropped
+/// (later scans are later: a reader refuses one out of order).
+#[derive(Debug, Clone, Default)]
+pub struct ScansAwaitingOdometry {
+    /// `None` odometry: still to interpolate.
+    pending: VecDeque<(RangeScan, Option<Pose2>)>,
+    odometry: OdometryTrack,
+}
+
+impl ScansAwaitingOdometry {
+    /// Queues a scan; `own` is the odometry its record carried, if any.
+    pub fn push_scan(&mut self, scan: RangeScan, own: Option<Pose2>) {
+        self.pending.push_back((scan, own));
+    }
+
+    /// Adds an odometry sample; see [`OdometryTrack::push`].
+    pub fn push_odometry(&mut self, t: f64, pose: Pose2) -> Result<(), OdometryError> {
+        self.odometry.push(t, pose)
+    }
+
+    /// The front scan, if it can be given out: it has its own pose, or
+    /// the odometry has reached its time, or no more odometry will come
+    /// (`complete`).
+    pub fn pop(&mut self, complete: bool) -> Option<ScanRecord> {
+        let (scan, own) = self.pending.front()?;
+        let odometry = match own {
+            Some(p) => Some(*p),
+            None => {
+                let reached = self.odometry.last_time().is_some_and(|last| last >= scan.t);
+                if !reached && !complete {
+                    return None;
+                }
+                self.odometry.at(scan.t)
+            }
+        };
+        let (scan, _) = self.pending.pop_front()?;
+        self.odometry.discard_before(scan.t);
+        Some(ScanRecord { scan, odometry })
+    }
+
+    /// Whether any odometry sample came.
+    pub fn has_odometry(&self) -> bool {
+        !self.odometry.is_empty()
+    }
+
+    /// Scans waiting.
+    pub fn waiting(&self) -> usize {
+        self.pending.len()
+    }
+
+    /// Drops the scans waiting (the input ended in an error).
+    pub fn clear(&mut self) {
+        self.pending.clear();
     }
 }
 
