@@ -5,12 +5,13 @@
 //! held up.
 
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use tracing::{error, info, warn};
+use tracing::{error, info};
 
+use super::handoff::Handoff;
 use super::ros2_out::{Stamped, TOPICS};
 use crate::ros2::bag::{BagError, BagWriter, Durability, RawTopic};
 
@@ -25,10 +26,9 @@ const FLUSH_EVERY: Duration = Duration::from_secs(1);
 /// A bag being written.
 #[derive(Debug)]
 pub struct BagSink {
-    tx: Option<SyncSender<Stamped>>,
+    queue: Handoff<Stamped>,
     thread: Option<JoinHandle<Result<u64, BagError>>>,
     path: PathBuf,
-    dropped: u64,
 }
 
 impl BagSink {
@@ -46,7 +46,7 @@ impl BagSink {
                 bag.raw_topic(&name, t.type_name, &(t.definition)(), durability)
             })
             .collect::<Result<Vec<RawTopic>, BagError>>()?;
-        let (tx, rx) = sync_channel(QUEUE);
+        let (queue, rx) = Handoff::new(QUEUE, "the bag writer");
         let thread = std::thread::Builder::new()
             .name("clsmap-bag".into())
             .spawn(move || write_all(bag, topics, &rx))
@@ -56,45 +56,27 @@ impl BagSink {
             })?;
         info!(path = %path.display(), "writing a rosbag2 bag of the run");
         Ok(BagSink {
-            tx: Some(tx),
+            queue,
             thread: Some(thread),
             path: path.to_owned(),
-            dropped: 0,
         })
     }
 
     /// Hands `messages` to the writer without waiting.
     pub fn send(&mut self, messages: Vec<Stamped>) {
-        let Some(tx) = &self.tx else { return };
         for m in messages {
-            match tx.try_send(m) {
-                Ok(()) => {}
-                Err(TrySendError::Full(_)) => {
-                    self.dropped += 1;
-                    if self.dropped == 1 {
-                        warn!("the bag writer falls behind: messages are dropped");
-                    }
-                }
-                Err(TrySendError::Disconnected(_)) => {
-                    // The writer stopped on an error; `finish` reports it.
-                    self.tx = None;
-                    return;
-                }
-            }
+            self.queue.send(m);
         }
     }
 
     /// Writes what is queued, the summary and the footer; returns the
     /// bag's path and how many messages it holds.
     pub fn finish(mut self) -> Result<(PathBuf, u64), BagError> {
-        drop(self.tx.take());
+        self.queue.close();
         let written = match self.thread.take().map(JoinHandle::join) {
             Some(Ok(result)) => result?,
             Some(Err(_)) | None => 0,
         };
-        if self.dropped > 0 {
-            warn!(dropped = self.dropped, "messages did not reach the bag");
-        }
         Ok((self.path.clone(), written))
     }
 }

@@ -11,7 +11,7 @@
 //! and `/map` are transient-local, so a subscriber that joins late still
 //! gets them.
 
-use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, sync_channel};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
@@ -24,6 +24,7 @@ use serde::ser::{Serialize, SerializeTuple, Serializer};
 use tracing::{info, warn};
 
 use super::config::Ros2Section;
+use super::handoff::Handoff;
 use super::ros2_out::{Ros2Message, Stamped, TOPICS};
 use crate::geometry::Pose2;
 use crate::ros2::{PoseWithCovarianceStamped, RosMessage, Twist};
@@ -82,9 +83,8 @@ struct Publishers {
 /// The ROS 2 node, publishing.
 #[derive(Debug)]
 pub struct DdsSink {
-    tx: Option<SyncSender<Stamped>>,
+    queue: Handoff<Stamped>,
     thread: Option<JoinHandle<()>>,
-    dropped: u64,
 }
 
 /// `pkg/msg/Type` as ros2-client's type name.
@@ -161,7 +161,7 @@ impl DdsSink {
         cfg: &Ros2Section,
         inbox: tokio::sync::mpsc::UnboundedSender<Ros2Command>,
     ) -> Result<DdsSink, DdsError> {
-        let (tx, rx) = sync_channel::<Stamped>(QUEUE);
+        let (queue, rx) = Handoff::new(QUEUE, "the ROS 2 node");
         let (ready_tx, ready_rx) = sync_channel::<Result<(), String>>(1);
         let cfg = cfg.clone();
         let thread = std::thread::Builder::new()
@@ -187,40 +187,23 @@ impl DdsSink {
              /cmd_vel /initialpose"
         );
         Ok(DdsSink {
-            tx: Some(tx),
+            queue,
             thread: Some(thread),
-            dropped: 0,
         })
     }
 
     /// Hands `messages` to the node without waiting.
     pub fn send(&mut self, messages: &[Stamped]) {
-        let Some(tx) = &self.tx else { return };
         for m in messages {
-            match tx.try_send(m.clone()) {
-                Ok(()) => {}
-                Err(TrySendError::Full(_)) => {
-                    self.dropped += 1;
-                    if self.dropped == 1 {
-                        warn!("the ROS 2 node falls behind: messages are dropped");
-                    }
-                }
-                Err(TrySendError::Disconnected(_)) => {
-                    self.tx = None;
-                    return;
-                }
-            }
+            self.queue.send(m.clone());
         }
     }
 
     /// Stops the node.
     pub fn finish(mut self) {
-        drop(self.tx.take());
+        self.queue.close();
         if let Some(t) = self.thread.take() {
             let _ = t.join();
-        }
-        if self.dropped > 0 {
-            warn!(dropped = self.dropped, "messages were not published");
         }
     }
 }

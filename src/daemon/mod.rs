@@ -21,6 +21,7 @@ pub mod config;
 pub mod core;
 #[cfg(feature = "dds")]
 pub mod dds_sink;
+pub mod handoff;
 pub mod latency;
 pub mod live;
 pub mod notify;
