@@ -161,6 +161,51 @@ raw = T["std_msgs/msg/UInt8MultiArray"](
 )
 cases.append(("byte_array", raw, "std_msgs/msg/UInt8MultiArray"))
 
+cmd = Twist(linear=Vector3(x=0.25, y=-0.125, z=0.0), angular=Vector3(x=0.0, y=0.0, z=0.5))
+cases.append(("twist", cmd, "geometry_msgs/msg/Twist"))
+
+Color = T["std_msgs/msg/ColorRGBA"]
+Duration = T["builtin_interfaces/msg/Duration"]
+Marker = T["visualization_msgs/msg/Marker"]
+Image = T["sensor_msgs/msg/CompressedImage"]
+MeshFile = T["visualization_msgs/msg/MeshFile"]
+
+
+def marker(ns, mid, kind, action, points, color, width, text):
+    return Marker(
+        header=header(13, 9, "map"),
+        ns=ns,
+        id=mid,
+        type=kind,
+        action=action,
+        pose=Pose(
+            position=Point(x=0.0, y=0.0, z=0.0),
+            orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
+        ),
+        scale=Vector3(x=width, y=0.0, z=0.0),
+        color=Color(r=color[0], g=color[1], b=color[2], a=color[3]),
+        lifetime=Duration(sec=0, nanosec=0),
+        frame_locked=False,
+        points=[Point(x=x, y=y, z=0.0) for x, y in points],
+        colors=[],
+        texture_resource="",
+        texture=Image(header=header(0, 0, ""), format="", data=u8([])),
+        uv_coordinates=[],
+        text=text,
+        mesh_resource="",
+        mesh_file=MeshFile(filename="", data=u8([])),
+        mesh_use_embedded_materials=False,
+    )
+
+
+markers = T["visualization_msgs/msg/MarkerArray"](
+    markers=[
+        marker("walls", 0, 5, 0, [(0.5, 1.0), (2.5, -1.25)], (0.1, 0.1, 0.1, 1.0), 0.05, "w"),
+        marker("frontiers", 1, 5, 2, [], (1.0, 0.5, 0.0, 0.75), 0.0, ""),
+    ]
+)
+cases.append(("marker_array", markers, "visualization_msgs/msg/MarkerArray"))
+
 out = {name: store.serialize_cdr(msg, typename).hex() for name, msg, typename in cases}
 with open(sys.argv[1], "w") as f:
     json.dump(out, f, indent=1, sort_keys=True)

@@ -1,12 +1,16 @@
 #!/usr/bin/env python3
 """A ROS 2 subscriber on an independent DDS stack (PyPI `cyclonedds`, no
-ROS installation): subscribes to /scan, /pose, /tf, /tf_static, /map and
-/diagnostics as RViz would, with the ROS 2 type names and the message
-layouts written here from the ROS 2 definitions, waits (bounded) for samples on each, and prints one
-JSON report. /tf_static and /map are read transient-local, so a
-subscriber that joins after they were sent still gets them.
+ROS installation): subscribes to /scan, /pose, /tf, /tf_static, /map,
+/cls_map and /diagnostics as RViz would, with the ROS 2 type names and the
+message layouts written here from the ROS 2 definitions, waits (bounded)
+for samples on each, and prints one JSON report. /tf_static, /map and
+/cls_map are read transient-local, so a subscriber that joins after they
+were sent still gets them.
 
-    python3 scripts/ros2_subscriber.py --domain 0 --timeout 60 [--namespace /robot1]
+    python3 scripts/ros2_subscriber.py --domain 0 --timeout 60 [--namespace /robot1] [--localhost]
+
+--localhost keeps this participant on the loopback interface (as
+ROS_LOCALHOST_ONLY=1), discovering peers by unicast on 127.0.0.1.
 
 With --cmd-vel V it then drives the robot: Twist messages on /cmd_vel at
 10 Hz for --drive seconds, and reports how far the pose moved.
@@ -18,148 +22,26 @@ import json
 import math
 import sys
 import time
-from dataclasses import dataclass
 
 from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import DomainParticipant
-from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import array, float32, float64, int8, int32, sequence, uint8, uint32
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-
-@dataclass
-class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
-    sec: int32
-    nanosec: uint32
-
-
-@dataclass
-class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
-    stamp: Time
-    frame_id: str
-
-
-@dataclass
-class LaserScan(IdlStruct, typename="sensor_msgs::msg::dds_::LaserScan_"):
-    header: Header
-    angle_min: float32
-    angle_max: float32
-    angle_increment: float32
-    time_increment: float32
-    scan_time: float32
-    range_min: float32
-    range_max: float32
-    ranges: sequence[float32]
-    intensities: sequence[float32]
-
-
-@dataclass
-class Point(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):
-    x: float64
-    y: float64
-    z: float64
-
-
-@dataclass
-class Vector3(IdlStruct, typename="geometry_msgs::msg::dds_::Vector3_"):
-    x: float64
-    y: float64
-    z: float64
-
-
-@dataclass
-class Quaternion(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
-    x: float64
-    y: float64
-    z: float64
-    w: float64
-
-
-@dataclass
-class Pose(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):
-    position: Point
-    orientation: Quaternion
-
-
-@dataclass
-class PoseWithCovariance(IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovariance_"):
-    pose: Pose
-    covariance: array[float64, 36]
-
-
-@dataclass
-class PoseWithCovarianceStamped(
-    IdlStruct, typename="geometry_msgs::msg::dds_::PoseWithCovarianceStamped_"
-):
-    header: Header
-    pose: PoseWithCovariance
-
-
-@dataclass
-class Transform(IdlStruct, typename="geometry_msgs::msg::dds_::Transform_"):
-    translation: Vector3
-    rotation: Quaternion
-
-
-@dataclass
-class TransformStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TransformStamped_"):
-    header: Header
-    child_frame_id: str
-    transform: Transform
-
-
-@dataclass
-class MapMetaData(IdlStruct, typename="nav_msgs::msg::dds_::MapMetaData_"):
-    map_load_time: Time
-    resolution: float32
-    width: uint32
-    height: uint32
-    origin: Pose
-
-
-@dataclass
-class OccupancyGrid(IdlStruct, typename="nav_msgs::msg::dds_::OccupancyGrid_"):
-    header: Header
-    info: MapMetaData
-    data: sequence[int8]
-
-
-@dataclass
-class KeyValue(IdlStruct, typename="diagnostic_msgs::msg::dds_::KeyValue_"):
-    key: str
-    value: str
-
-
-@dataclass
-class DiagnosticStatus(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticStatus_"):
-    level: uint8
-    name: str
-    message: str
-    hardware_id: str
-    values: sequence[KeyValue]
-
-
-@dataclass
-class DiagnosticArray(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticArray_"):
-    header: Header
-    status: sequence[DiagnosticStatus]
-
-
-@dataclass
-class Twist(IdlStruct, typename="geometry_msgs::msg::dds_::Twist_"):
-    linear: Vector3
-    angular: Vector3
-
-
-@dataclass
-class TFMessage(IdlStruct, typename="tf2_msgs::msg::dds_::TFMessage_"):
-    transforms: sequence[TransformStamped]
-
-
-def yaw(q):
-    return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+sys.path.insert(0, __import__("os").path.dirname(__file__))
+from ros2_types import (  # noqa: E402
+    DiagnosticArray,
+    LaserScan,
+    MarkerArray,
+    OccupancyGrid,
+    PoseWithCovarianceStamped,
+    TFMessage,
+    Twist,
+    Vector3,
+    localhost_only,
+    yaw,
+)
 
 
 def main():
@@ -175,7 +57,10 @@ def main():
         help="also drive: publish this forward speed (m/s) on /cmd_vel at 10 Hz for --drive seconds",
     )
     ap.add_argument("--drive", type=float, default=3.0)
+    ap.add_argument("--localhost", action="store_true", help="loopback only")
     a = ap.parse_args()
+    if a.localhost:
+        localhost_only()
     time.sleep(a.late)
     dp = DomainParticipant(a.domain)
     reliable = Qos(
@@ -196,6 +81,7 @@ def main():
         "/tf": DataReader(dp, Topic(dp, prefix + "tf", TFMessage), qos=reliable),
         "/tf_static": DataReader(dp, Topic(dp, prefix + "tf_static", TFMessage), qos=latched),
         "/map": DataReader(dp, Topic(dp, prefix + "map", OccupancyGrid), qos=latched),
+        "/cls_map": DataReader(dp, Topic(dp, prefix + "cls_map", MarkerArray), qos=latched),
         "/diagnostics": DataReader(
             dp, Topic(dp, prefix + "diagnostics", DiagnosticArray), qos=reliable
         ),
@@ -210,7 +96,7 @@ def main():
     deadline = started + a.timeout
     first_at = {}
     def enough():
-        once = ("/tf_static", "/map", "/diagnostics")
+        once = ("/tf_static", "/map", "/cls_map", "/diagnostics")
         return all(got[k] for k in once) and all(
             len(v) >= 3 for k, v in got.items() if k not in once
         )
@@ -278,6 +164,17 @@ def main():
             "free": data.count(0),
             "occupied": data.count(100),
             "unknown": data.count(-1),
+        }
+    if got["/cls_map"]:
+        report["cls_map"] = {
+            m.ns: {
+                "frame_id": m.header.frame_id,
+                "type": m.type,
+                "action": m.action,
+                "points": len(m.points),
+                "width": m.scale.x,
+            }
+            for m in got["/cls_map"][-1].markers
         }
     if got["/diagnostics"]:
         d = got["/diagnostics"][-1]

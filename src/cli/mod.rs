@@ -326,8 +326,15 @@ impl Cli {
 /// Logs to stderr; RUST_LOG or else CLSMAP_LOG (the systemd unit's), if
 /// set, wins over -v/-q. A command with live progress of its own starts a
 /// level lower (warnings), so the log does not drown the progress line.
+/// The DDS stack's own discovery chatter (a hundred lines at a node's
+/// start) shows from -v on; below that only its errors.
 pub fn init_logging(verbose: u8, quiet: bool, shows_progress: bool) {
-    const LEVELS: [&str; 4] = ["warn", "info", "debug", "trace"];
+    const LEVELS: [&str; 4] = [
+        "warn,rustdds=error,ros2_client=error",
+        "info,rustdds=error,ros2_client=error",
+        "debug",
+        "trace",
+    ];
     let level = if quiet {
         0
     } else {

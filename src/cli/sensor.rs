@@ -8,7 +8,8 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, bail};
-use clsmap::daemon::ros2_out::LASER_FRAME;
+use clsmap::daemon::ros2_out::{LASER_FRAME, RECORDING_TOPIC};
+use clsmap::files::tee::Tee;
 use clsmap::input::bag::laser_scan;
 use clsmap::input::lms200::{
     lms200_reach, lms200_scan_timing, note_mode, range_scan, scan_time_us, seconds,
@@ -125,22 +126,6 @@ impl Write for SharedBytes {
     }
 }
 
-/// Writes to both the recording file and the bag's buffer.
-struct Tee(Vec<Box<dyn Write + Send>>);
-
-impl Write for Tee {
-    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        for w in &mut self.0 {
-            w.write_all(buf)?;
-        }
-        Ok(buf.len())
-    }
-
-    fn flush(&mut self) -> std::io::Result<()> {
-        self.0.iter_mut().try_for_each(|w| w.flush())
-    }
-}
-
 /// The bag `record --bag` writes, as the scans come.
 struct RecordBag {
     writer: BagWriter,
@@ -220,10 +205,6 @@ impl RecordBag {
         Ok(())
     }
 }
-
-/// The topic whose messages, concatenated, are the clsmap recording of
-/// the run byte for byte.
-pub const RECORDING_TOPIC: &str = "/lms200/recording";
 
 pub fn record(
     port: &Path,

@@ -34,9 +34,8 @@ pub struct DaemonConfig {
 
 /// `[ros2]`: a ROS 2 node on DDS (pure Rust, no ROS installation) that
 /// publishes what the daemon's bag holds: /scan, /pose, /odom, /tf,
-/// /tf_static, /map and /diagnostics, and listens to /cmd_vel and
-/// /initialpose (frames `map`, `odom`, `base_link`, `laser`, REP
-/// 105).
+/// /tf_static, /map, /cls_map and /diagnostics, and listens to /cmd_vel
+/// and /initialpose (frames after REP 105, named here).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Ros2Section {
@@ -45,11 +44,26 @@ pub struct Ros2Section {
     pub enabled: bool,
     /// DDS domain, as `ROS_DOMAIN_ID` (0–232; default 0).
     pub domain_id: u16,
+    /// DDS on this machine only (as `ROS_LOCALHOST_ONLY=1`): discovery
+    /// and data go over the loopback interface (default false).
+    pub localhost_only: bool,
     /// Namespace of the node and its topics (default "": `/scan`, …;
     /// "/robot1" gives `/robot1/scan`, …).
     pub namespace: String,
     /// The node's name (default "clsmap").
     pub node_name: String,
+    /// The frames of REP 105: the map, the odometry, the robot and the
+    /// laser (defaults "map", "odom", "base_link", "laser").
+    pub map_frame: String,
+    pub odom_frame: String,
+    pub base_frame: String,
+    pub laser_frame: String,
+    /// `/map` is sent at most this often (s; default 5), when the map
+    /// changed.
+    pub map_interval: f64,
+    /// Cell side of `/map` (m; default 0.05), coarsened (doubled) until
+    /// the grid has at most 2 million cells.
+    pub map_resolution: f64,
 }
 
 impl Default for Ros2Section {
@@ -57,8 +71,15 @@ impl Default for Ros2Section {
         Ros2Section {
             enabled: false,
             domain_id: 0,
+            localhost_only: false,
             namespace: String::new(),
             node_name: "clsmap".into(),
+            map_frame: "map".into(),
+            odom_frame: "odom".into(),
+            base_frame: "base_link".into(),
+            laser_frame: "laser".into(),
+            map_interval: 5.0,
+            map_resolution: 0.05,
         }
     }
 }
@@ -224,6 +245,9 @@ pub enum BaseKind {
     Tcp,
     /// A real base bridged by the line protocol over a serial port.
     Serial,
+    /// A base driven by its own ROS 2 driver: odometry from its
+    /// `odom_topic`, commands to its `cmd_vel_topic`.
+    Ros2,
     /// Odometry replayed from a recording or CARMEN log (`replay`); the
     /// robot cannot be driven.
     Replay,
@@ -242,6 +266,10 @@ pub struct BaseConfig {
     /// /dev/xr4000, 115200 Bd).
     pub port: PathBuf,
     pub baud: u32,
+    /// `ros2`: the base driver's odometry (nav_msgs/Odometry) and command
+    /// (geometry_msgs/Twist) topics (defaults /odom, /cmd_vel).
+    pub odom_topic: String,
+    pub cmd_vel_topic: String,
     /// `replay`: the recording or CARMEN log whose odometry is played.
     pub replay: Option<PathBuf>,
     /// Odometry polls and velocity commands per second (default 50 Hz).
@@ -264,6 +292,8 @@ impl Default for BaseConfig {
             address: "127.0.0.1:7300".into(),
             port: PathBuf::from("/dev/xr4000"),
             baud: 115_200,
+            odom_topic: "/odom".into(),
+            cmd_vel_topic: "/cmd_vel".into(),
             replay: None,
             rate: 50.0,
             stale_odometry: 0.5,
@@ -647,6 +677,31 @@ impl DaemonConfig {
                 ),
             });
         }
+        within("ros2.map_interval", r.map_interval, 0.5, 3600.0)?;
+        within("ros2.map_resolution", r.map_resolution, 0.01, 1.0)?;
+        for (key, frame) in [
+            ("ros2.map_frame", &r.map_frame),
+            ("ros2.odom_frame", &r.odom_frame),
+            ("ros2.base_frame", &r.base_frame),
+            ("ros2.laser_frame", &r.laser_frame),
+        ] {
+            // tf2 frame ids: no leading slash, no spaces.
+            if frame.is_empty() || frame.starts_with('/') || !name_ok(frame, true) {
+                return Err(DaemonConfigError::Invalid {
+                    key: key.into(),
+                    line: locate(key),
+                    reason: format!("{frame:?} is not a frame id (letters, digits, _ and /)"),
+                });
+            }
+        }
+        let frames = [&r.map_frame, &r.odom_frame, &r.base_frame, &r.laser_frame];
+        if (1..frames.len()).any(|i| frames[..i].contains(&frames[i])) {
+            return Err(DaemonConfigError::Invalid {
+                key: "ros2.map_frame".into(),
+                line: locate("ros2.map_frame"),
+                reason: "the four frames need four names".into(),
+            });
+        }
         if r.node_name.is_empty()
             || !name_ok(&r.node_name, false)
             || r.node_name.starts_with(|c: char| c.is_ascii_digit())
@@ -656,6 +711,30 @@ impl DaemonConfig {
                 line: locate("ros2.node_name"),
                 reason: format!("{:?} is not a ROS 2 node name", r.node_name),
             });
+        }
+        if b.adapter == BaseKind::Ros2 {
+            if !cfg!(feature = "dds") {
+                return Err(DaemonConfigError::Invalid {
+                    key: "base.adapter".into(),
+                    line: locate("base.adapter"),
+                    reason: "this build has no ROS 2 (built without the `dds` feature)".into(),
+                });
+            }
+            for (key, topic) in [
+                ("base.odom_topic", &b.odom_topic),
+                ("base.cmd_vel_topic", &b.cmd_vel_topic),
+            ] {
+                if !(topic.starts_with('/') && topic.len() > 1)
+                    || topic.ends_with('/')
+                    || !name_ok(topic, true)
+                {
+                    return Err(DaemonConfigError::Invalid {
+                        key: key.into(),
+                        line: locate(key),
+                        reason: format!("{topic:?} is not a ROS 2 topic (/letters_digits/…)"),
+                    });
+                }
+            }
         }
         self.mapper.validate().map_err(|e| {
             let key = match &e {
@@ -836,11 +915,36 @@ mod tests {
                 "[ros2]\nnode_name = \"9lives\"\n",
                 "ros2.node_name (line 2)",
             ),
+            ("[ros2]\nmap_frame = \"/map\"\n", "ros2.map_frame (line 2)"),
+            (
+                "[ros2]\nlaser_frame = \"base_link\"\n",
+                "the four frames need four names",
+            ),
+            ("[ros2]\nmap_interval = 0.0\n", "ros2.map_interval (line 2)"),
+            (
+                "[ros2]\n\nmap_resolution = 5.0\n",
+                "ros2.map_resolution (line 3)",
+            ),
+            (
+                "[base]\nadapter = \"ros2\"\nodom_topic = \"odom\"\n",
+                "base.odom_topic (line 3)",
+            ),
+            (
+                "[base]\nadapter = \"ros2\"\ncmd_vel_topic = \"/a b\"\n",
+                "base.cmd_vel_topic (line 3)",
+            ),
         ] {
             let e = DaemonConfig::from_toml(text).unwrap_err().to_string();
             assert!(e.contains(key), "{text}: {e}");
         }
         assert!(DaemonConfig::from_toml("[ros2]\ndomain_id = 70000\n").is_err());
+        let c = DaemonConfig::from_toml(
+            "[ros2]\nbase_frame = \"robot1/base_link\"\n[base]\nadapter = \"ros2\"\n\
+             odom_topic = \"/robot1/odom\"\n",
+        )
+        .unwrap();
+        assert_eq!(c.ros2.base_frame, "robot1/base_link");
+        assert_eq!(c.base.adapter, BaseKind::Ros2);
     }
 
     #[test]

@@ -8,8 +8,10 @@
 //! them unchanged, so the DDS shell adds no second encoding. Every topic
 //! is reliable (a reliable writer serves best-effort and reliable readers
 //! alike: RViz, Foxglove and `ros2 topic echo` all match); `/tf_static`
-//! and `/map` are transient-local, so a subscriber that joins late still
-//! gets them.
+//! `/map` and `/cls_map` are transient-local, so a subscriber that joins
+//! late still gets them. When the base is a ROS 2 node
+//! ([`super::ros2_base`]), its driver owns `/odom` and `/cmd_vel`: the node
+//! then neither publishes the one nor listens to the other.
 
 use std::sync::mpsc::{Receiver, RecvTimeoutError, sync_channel};
 use std::thread::JoinHandle;
@@ -25,7 +27,7 @@ use tracing::{info, warn};
 
 use super::config::Ros2Section;
 use super::handoff::Handoff;
-use super::ros2_out::{Ros2Message, Stamped, TOPICS};
+use super::ros2_out::{ODOM_TOPIC, Ros2Message, Stamped, TOPICS};
 use crate::geometry::Pose2;
 use crate::ros2::{PoseWithCovarianceStamped, RosMessage, Twist};
 
@@ -59,7 +61,7 @@ pub enum DdsError {
 /// A message's CDR body, written as it is: a tuple of bytes has neither a
 /// length nor padding in CDR, and the body's alignment counts from its
 /// first byte in both encoders.
-struct CdrBody(Vec<u8>);
+pub(super) struct CdrBody(pub(super) Vec<u8>);
 
 impl Serialize for CdrBody {
     fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
@@ -71,11 +73,13 @@ impl Serialize for CdrBody {
     }
 }
 
-/// The node's publishers (in [`TOPICS`] order) and subscriptions.
+/// The node's publishers (in [`TOPICS`] order; `None` for one it leaves
+/// to the base's driver) and subscriptions.
 struct Publishers {
-    topics: Vec<Publisher<CdrBody>>,
-    cmd_vel: Subscription<Twist>,
+    topics: Vec<Option<Publisher<CdrBody>>>,
+    cmd_vel: Option<Subscription<Twist>>,
     initial_pose: Subscription<PoseWithCovarianceStamped>,
+    map_frame: String,
     /// Kept alive while publishing.
     _node: Node,
 }
@@ -88,21 +92,40 @@ pub struct DdsSink {
 }
 
 /// `pkg/msg/Type` as ros2-client's type name.
-fn type_name(full: &str) -> MessageTypeName {
+pub(super) fn type_name(full: &str) -> MessageTypeName {
     let mut parts = full.split('/');
     let package = parts.next().unwrap_or_default();
     let name = parts.next_back().unwrap_or_default();
     MessageTypeName::new(package, name)
 }
 
-fn start_node(cfg: &Ros2Section) -> Result<Publishers, String> {
-    let context = Context::with_options(ContextOptions::new().domain_id(cfg.domain_id))
-        .map_err(|e| format!("DDS participant: {e:?}"))?;
-    let namespace = if cfg.namespace.is_empty() {
+/// A DDS participant as `cfg` says: its domain, and only the loopback
+/// interface with `localhost_only`.
+pub fn ros2_context(cfg: &Ros2Section) -> Result<Context, String> {
+    if cfg.localhost_only {
+        let participant = ros2_client::dds::rustdds::DomainParticipantBuilder::new(cfg.domain_id)
+            .with_only_networks([std::net::Ipv4Addr::LOCALHOST])
+            .build()
+            .map_err(|e| format!("DDS participant: {e:?}"))?;
+        Context::from_domain_participant(participant)
+    } else {
+        Context::with_options(ContextOptions::new().domain_id(cfg.domain_id))
+    }
+    .map_err(|e| format!("DDS participant: {e:?}"))
+}
+
+/// The node's namespace as ros2-client takes it.
+pub fn namespace(cfg: &Ros2Section) -> &str {
+    if cfg.namespace.is_empty() {
         "/"
     } else {
         cfg.namespace.as_str()
-    };
+    }
+}
+
+fn start_node(cfg: &Ros2Section, base_is_ros2: bool) -> Result<Publishers, String> {
+    let context = ros2_context(cfg)?;
+    let namespace = namespace(cfg);
     let mut node = context
         .new_node(
             NodeName::new(namespace, &cfg.node_name).map_err(|e| format!("node name: {e:?}"))?,
@@ -112,7 +135,11 @@ fn start_node(cfg: &Ros2Section) -> Result<Publishers, String> {
         )
         .map_err(|e| format!("node: {e:?}"))?;
     let mut topics = Vec::with_capacity(TOPICS.len());
-    for t in &TOPICS {
+    for (i, t) in TOPICS.iter().enumerate() {
+        if base_is_ros2 && i == ODOM_TOPIC {
+            topics.push(None);
+            continue;
+        }
         let qos = QosProfile::publisher_default()
             .reliability_reliable(WhenFull::Wait(WRITE_WAIT))
             .durability(if t.latched {
@@ -125,10 +152,10 @@ fn start_node(cfg: &Ros2Section) -> Result<Publishers, String> {
         let topic = node
             .create_topic(&name, type_name(t.type_name), &qos)
             .map_err(|e| format!("topic {}: {e:?}", t.name))?;
-        topics.push(
+        topics.push(Some(
             node.create_publisher::<CdrBody>(&topic, Some(qos))
                 .map_err(|e| format!("publisher: {e:?}"))?,
-        );
+        ));
     }
     // Best-effort readers match reliable and best-effort writers alike
     // (teleop tools and RViz use either).
@@ -140,9 +167,13 @@ fn start_node(cfg: &Ros2Section) -> Result<Publishers, String> {
     };
     let cmd_vel_topic = subscription("cmd_vel", Twist::TYPE)?;
     let initial_pose_topic = subscription("initialpose", PoseWithCovarianceStamped::TYPE)?;
-    let cmd_vel = node
-        .create_subscription::<Twist>(&cmd_vel_topic, Some(listen.clone()))
-        .map_err(|e| format!("subscription: {e:?}"))?;
+    let cmd_vel = match base_is_ros2 {
+        true => None,
+        false => Some(
+            node.create_subscription::<Twist>(&cmd_vel_topic, Some(listen.clone()))
+                .map_err(|e| format!("subscription: {e:?}"))?,
+        ),
+    };
     let initial_pose = node
         .create_subscription::<PoseWithCovarianceStamped>(&initial_pose_topic, Some(listen))
         .map_err(|e| format!("subscription: {e:?}"))?;
@@ -150,15 +181,18 @@ fn start_node(cfg: &Ros2Section) -> Result<Publishers, String> {
         topics,
         cmd_vel,
         initial_pose,
+        map_frame: cfg.map_frame.clone(),
         _node: node,
     })
 }
 
 impl DdsSink {
-    /// Starts the node as `cfg` says; returns once its publishers exist.
-    /// What it hears goes to `inbox`.
+    /// Starts the node as `cfg` says (leaving `/odom` and `/cmd_vel` to
+    /// the base's driver when `base_is_ros2`); returns once its publishers
+    /// exist. What it hears goes to `inbox`.
     pub fn start(
         cfg: &Ros2Section,
+        base_is_ros2: bool,
         inbox: tokio::sync::mpsc::UnboundedSender<Ros2Command>,
     ) -> Result<DdsSink, DdsError> {
         let (queue, rx) = Handoff::new(QUEUE, "the ROS 2 node");
@@ -166,7 +200,7 @@ impl DdsSink {
         let cfg = cfg.clone();
         let thread = std::thread::Builder::new()
             .name("clsmap-ros2".into())
-            .spawn(move || match start_node(&cfg) {
+            .spawn(move || match start_node(&cfg, base_is_ros2) {
                 Ok(p) => {
                     let _ = ready_tx.send(Ok(()));
                     run_node(&p, &rx, &inbox);
@@ -181,10 +215,16 @@ impl DdsSink {
             Ok(Err(e)) => return Err(DdsError::Start(e)),
             Err(_) => return Err(DdsError::Start("the node's thread ended".into())),
         }
+        let published: Vec<String> = TOPICS
+            .iter()
+            .enumerate()
+            .filter(|&(i, _)| !(base_is_ros2 && i == ODOM_TOPIC))
+            .map(|(_, t)| format!("/{}", t.name))
+            .collect();
         info!(
-            "ROS 2 node up: publishing /scan /pose /odom /tf /tf_static /map /diagnostics, \
-             listening to \
-             /cmd_vel /initialpose"
+            "ROS 2 node up: publishing {}, listening to {}/initialpose",
+            published.join(" "),
+            if base_is_ros2 { "" } else { "/cmd_vel " }
         );
         Ok(DdsSink {
             queue,
@@ -227,7 +267,7 @@ fn run_node(
             Err(RecvTimeoutError::Timeout) => {}
             Err(RecvTimeoutError::Disconnected) => return,
         }
-        while let Ok(Some((t, _))) = p.cmd_vel.take() {
+        while let Some(Ok(Some((t, _)))) = p.cmd_vel.as_ref().map(Subscription::take) {
             let twist = clsmap_base::Twist {
                 vx: t.linear.x,
                 vy: t.linear.y,
@@ -239,7 +279,7 @@ fn run_node(
         }
         while let Ok(Some((m, _))) = p.initial_pose.take() {
             let frame = m.header.frame_id.trim_start_matches('/');
-            if !(frame.is_empty() || frame == super::ros2_out::MAP_FRAME) {
+            if !(frame.is_empty() || frame == p.map_frame) {
                 warn!(frame, "a pose hint not in the map frame is ignored");
                 continue;
             }
@@ -254,7 +294,8 @@ fn run_node(
 
 fn publish(p: &Publishers, message: &Ros2Message) -> Result<(), ()> {
     // Rendered (a map's grid) and encoded here, off the loop.
-    let (Some(mut cdr), Some(publisher)) = (message.encode(), p.topics.get(message.topic_index()))
+    let (Some(mut cdr), Some(Some(publisher))) =
+        (message.encode(), p.topics.get(message.topic_index()))
     else {
         return Ok(());
     };

@@ -9,6 +9,9 @@
 //! - [`latency`]: per-stage latency histograms.
 //! - [`sensor`]: the serial driver's thread, latest scan wins.
 //! - [`notify`]: systemd's READY/WATCHDOG/STATUS/STOPPING.
+//! - [`ros2_out`]: the ROS 2 messages of each scan and of the map (sans-IO);
+//!   `bag_sink` writes them into a bag, `dds_sink` onto DDS.
+//! - `ros2_base`: a base behind its own ROS 2 driver (feature `dds`).
 //! - [`run_dir`]: the run's directory and the rescue of a map that cannot go there.
 //! - [`runtime`]: the tokio shell around the core, [`run`].
 //! - [`simulation`]: the simulated robot and [`VirtualRobot`](simulation::VirtualRobot): the same core on a virtual clock, faster than real
@@ -25,6 +28,8 @@ pub mod handoff;
 pub mod latency;
 pub mod live;
 pub mod notify;
+#[cfg(feature = "dds")]
+pub mod ros2_base;
 pub mod ros2_out;
 pub mod run_dir;
 pub mod runtime;

@@ -1,7 +1,11 @@
 //! What the daemon tells ROS 2 about each scan, as messages: the scan, the
 //! pose estimate with its covariance, the odometry, and the transforms of
 //! REP 105 (`map` → `odom` from the localizer, `odom` → `base_link` from the
-//! base's odometry, `base_link` → `laser` from the mounting, once, static).
+//! base's odometry, `base_link` → `laser` from the mounting, once, static);
+//! and, at a bounded rate, the map as an occupancy grid (`/map`) and as
+//! lines (`/cls_map`). The frames are named by `[ros2]`; when the base is a
+//! ROS 2 node itself, its driver publishes `/odom` and `odom` → `base_link`,
+//! so they are left out here.
 //!
 //! Sans-IO, like the core it belongs to: [`Ros2Outbox`] turns a scan and
 //! its pose into stamped messages; a shell writes them into a bag (or, later,
@@ -11,6 +15,7 @@
 use std::collections::VecDeque;
 use std::sync::Arc;
 
+use super::config::Ros2Section;
 use crate::map::cls::{ClsMap, GridConfig, occupancy_grid};
 
 use crate::geometry::{Pose2, RangeScan};
@@ -18,22 +23,26 @@ use crate::input::bag::laser_scan;
 use crate::input::lms200::lms200_scan_timing;
 use crate::ros2::msg::{PoseWithCovariance, TransformStamped, TwistWithCovariance};
 use crate::ros2::{
-    DiagnosticArray, DiagnosticStatus, Header, LaserScan, OccupancyGrid, Odometry,
-    PoseWithCovarianceStamped, Quaternion, RosMessage, TfMessage, Time, Vector3,
+    ColorRgba, DiagnosticArray, DiagnosticStatus, Header, LaserScan, Marker, MarkerArray,
+    OccupancyGrid, Odometry, PoseWithCovarianceStamped, Quaternion, RosMessage, TfMessage, Time,
+    Vector3,
 };
 
-/// REP 105 frame names.
-pub const MAP_FRAME: &str = "map";
-pub const ODOM_FRAME: &str = "odom";
-pub const BASE_FRAME: &str = "base_link";
+/// The laser's frame when no `[ros2]` names one (`clsmap record --bag`).
 pub const LASER_FRAME: &str = "laser";
 
-/// `/map` is sent at most this often (s), and only when the map changed.
-pub const MAP_EVERY: f64 = 5.0;
-/// Cell side of `/map` (m), coarsened (doubled) until the grid has at most
-/// [`MAP_MAX_CELLS`] cells: DDS carries a megabyte or two well, not tens.
-pub const MAP_RESOLUTION: f64 = 0.05;
+/// The bag topic whose messages, put end to end, are the recording (the
+/// `.rec` format) of the serial stream byte for byte.
+pub const RECORDING_TOPIC: &str = "/lms200/recording";
+
+/// `/map` has at most this many cells (its resolution is doubled until
+/// it fits): DDS carries a megabyte or two well, not tens.
 pub const MAP_MAX_CELLS: usize = 2_000_000;
+
+/// Frontiers on `/cls_map` are drawn dashed: this much line (m), …
+const DASH: f64 = 0.2;
+/// … then this much gap.
+const DASH_GAP: f64 = 0.1;
 
 /// Messages held for the shell at most; older ones are dropped (and
 /// counted) if it does not take them, so the loop's memory stays bounded.
@@ -58,19 +67,28 @@ pub enum Ros2Message {
     Diagnostics(DiagnosticArray),
     /// `/map` (transient-local): the CLS map as it was, to be rendered as
     /// an occupancy grid by the shell ([`grid_message`]), off the loop.
-    Map(MapSnapshot),
+    Map(Arc<MapSnapshot>),
+    /// `/cls_map` (transient-local): the same map as lines
+    /// ([`marker_message`]), rendered by the shell.
+    ClsMap(Arc<MapSnapshot>),
 }
 
-/// The CLS map at one time, shared (cloning it is the loop's one cost).
-#[derive(Debug, Clone)]
+/// The CLS map at one time and the pose graph's loop edges then, shared
+/// by `/map` and `/cls_map` (cloning the map is the loop's one cost).
+#[derive(Debug)]
 pub struct MapSnapshot {
-    pub map: Arc<ClsMap>,
+    pub map: ClsMap,
+    /// Lines between the keyframes each loop closure joins (map frame, m).
+    pub loop_edges: Vec<[[f64; 2]; 2]>,
     pub stamp: Time,
+    pub frame: String,
+    /// `/map`'s finest cell side (m).
+    pub resolution: f64,
 }
 
 impl PartialEq for MapSnapshot {
     fn eq(&self, other: &Self) -> bool {
-        Arc::ptr_eq(&self.map, &other.map) && self.stamp == other.stamp
+        std::ptr::eq(self, other)
     }
 }
 
@@ -88,7 +106,7 @@ pub struct Ros2Topic {
 
 /// Every topic, in [`Ros2Message::topic_index`] order: the one table the
 /// bag and the DDS node are built from.
-pub const TOPICS: [Ros2Topic; 7] = [
+pub const TOPICS: [Ros2Topic; 8] = [
     topic::<LaserScan>("scan", false, 10),
     topic::<PoseWithCovarianceStamped>("pose", false, 10),
     topic::<Odometry>("odom", false, 10),
@@ -96,7 +114,12 @@ pub const TOPICS: [Ros2Topic; 7] = [
     topic::<TfMessage>("tf_static", true, 1),
     topic::<OccupancyGrid>("map", true, 1),
     topic::<DiagnosticArray>("diagnostics", false, 10),
+    topic::<MarkerArray>("cls_map", true, 1),
 ];
+
+/// The place in [`TOPICS`] of `/odom`, which a ROS 2 base's own driver
+/// publishes instead.
+pub const ODOM_TOPIC: usize = 2;
 
 const fn topic<M: RosMessage>(name: &'static str, latched: bool, depth: usize) -> Ros2Topic {
     Ros2Topic {
@@ -119,6 +142,7 @@ impl Ros2Message {
             Ros2Message::TfStatic(_) => 4,
             Ros2Message::Map(_) => 5,
             Ros2Message::Diagnostics(_) => 6,
+            Ros2Message::ClsMap(_) => 7,
         }
     }
 
@@ -137,6 +161,7 @@ impl Ros2Message {
             Ros2Message::Tf(m) | Ros2Message::TfStatic(m) => m.to_cdr(),
             Ros2Message::Diagnostics(m) => m.to_cdr(),
             Ros2Message::Map(m) => grid_message(m)?.to_cdr(),
+            Ros2Message::ClsMap(m) => marker_message(m).to_cdr(),
         })
     }
 }
@@ -153,6 +178,11 @@ pub struct Stamped {
 pub struct Ros2Outbox {
     /// Wall-clock time (s since the epoch) at the daemon's clock's zero.
     epoch: f64,
+    /// Frame names and the map's rate and resolution.
+    settings: Ros2Section,
+    /// Whether the base is a ROS 2 node that publishes its own odometry
+    /// and `odom` → `base_link`.
+    base_publishes_odometry: bool,
     mount: Pose2,
     /// The sensor's reach (m), the scans' `range_max`.
     reach: f64,
@@ -202,10 +232,19 @@ fn covariance_6(cov: &[[f64; 3]; 3]) -> [f64; 36] {
 impl Ros2Outbox {
     /// `epoch`: the wall clock (s since the epoch) at the daemon's zero;
     /// `mount`: the laser in the base frame; `reach`: the sensor's range
-    /// limit (m).
-    pub fn new(epoch: f64, mount: Pose2, reach: f64) -> Self {
+    /// limit (m); `settings`: the frames and the map's rate;
+    /// `base_publishes_odometry`: the base is a ROS 2 node.
+    pub fn new(
+        epoch: f64,
+        mount: Pose2,
+        reach: f64,
+        settings: &Ros2Section,
+        base_publishes_odometry: bool,
+    ) -> Self {
         Ros2Outbox {
             epoch,
+            settings: settings.clone(),
+            base_publishes_odometry,
             mount,
             reach,
             queue: VecDeque::new(),
@@ -217,11 +256,11 @@ impl Ros2Outbox {
     }
 
     /// Whether a map that is now at `version` (any number that changes
-    /// when the map does) is due at `t`: changed, and [`MAP_EVERY`] since
+    /// when the map does) is due at `t`: changed, and `map_interval` since
     /// the last.
     pub fn map_due(&self, version: u64, t: f64) -> bool {
         self.map_sent
-            .is_none_or(|(v, at)| v != version && t - at >= MAP_EVERY)
+            .is_none_or(|(v, at)| v != version && t - at >= self.settings.map_interval)
     }
 
     /// Queues the health of the parts for `/diagnostics` at `t`.
@@ -239,11 +278,19 @@ impl Ros2Outbox {
         );
     }
 
-    /// Queues `map` (at `version`) for `/map` at `t`.
-    pub fn map(&mut self, version: u64, t: f64, map: Arc<ClsMap>) {
+    /// Queues `map` (at `version`) with the pose graph's `loop_edges`
+    /// for `/map` and `/cls_map` at `t`.
+    pub fn map(&mut self, version: u64, t: f64, map: ClsMap, loop_edges: Vec<[[f64; 2]; 2]>) {
         self.map_sent = Some((version, t));
-        let stamp = Time::from_secs(self.epoch + t).unwrap_or_default();
-        self.push(t, Ros2Message::Map(MapSnapshot { map, stamp }));
+        let snapshot = Arc::new(MapSnapshot {
+            map,
+            loop_edges,
+            stamp: Time::from_secs(self.epoch + t).unwrap_or_default(),
+            frame: self.settings.map_frame.clone(),
+            resolution: self.settings.map_resolution,
+        });
+        self.push(t, Ros2Message::Map(Arc::clone(&snapshot)));
+        self.push(t, Ros2Message::ClsMap(snapshot));
     }
 
     fn push(&mut self, t: f64, message: Ros2Message) {
@@ -267,9 +314,12 @@ impl Ros2Outbox {
     ) {
         let t = scan.t;
         let stamp = Time::from_secs(self.epoch + t).unwrap_or_default();
+        let f = &self.settings;
+        let (map_frame, odom_frame) = (f.map_frame.clone(), f.odom_frame.clone());
+        let (base_frame, laser_frame) = (f.base_frame.clone(), f.laser_frame.clone());
         if !self.static_sent {
             self.static_sent = true;
-            let tf = transform(stamp, BASE_FRAME, LASER_FRAME, &self.mount);
+            let tf = transform(stamp, &base_frame, &laser_frame, &self.mount);
             self.push(
                 t,
                 Ros2Message::TfStatic(TfMessage {
@@ -283,7 +333,7 @@ impl Ros2Outbox {
             t: self.epoch + t,
             ..scan.clone()
         };
-        let msg = laser_scan(&wall, LASER_FRAME, self.reach, time_increment, scan_time);
+        let msg = laser_scan(&wall, &laser_frame, self.reach, time_increment, scan_time);
         self.push(t, Ros2Message::Scan(msg));
         let header = |frame: &str| Header {
             stamp,
@@ -292,7 +342,7 @@ impl Ros2Outbox {
         self.push(
             t,
             Ros2Message::Pose(Box::new(PoseWithCovarianceStamped {
-                header: header(MAP_FRAME),
+                header: header(&map_frame),
                 pose: PoseWithCovariance {
                     position: Vector3 {
                         x: pose.x,
@@ -308,22 +358,22 @@ impl Ros2Outbox {
         // base, odom is base_link. A scan whose odometry is missing while
         // a base is there gets no transforms: odom must not jump (REP 105).
         self.had_odometry |= odometry.is_some();
-        if odometry.is_none() && self.had_odometry {
+        if odometry.is_none() && (self.had_odometry || self.base_publishes_odometry) {
             return;
         }
         let odom = odometry.unwrap_or(Pose2::IDENTITY);
         let map_to_odom = pose.compose(&odom.inverse());
-        let transforms = vec![
-            transform(stamp, MAP_FRAME, ODOM_FRAME, &map_to_odom),
-            transform(stamp, ODOM_FRAME, BASE_FRAME, &odom),
-        ];
+        let mut transforms = vec![transform(stamp, &map_frame, &odom_frame, &map_to_odom)];
+        if !self.base_publishes_odometry {
+            transforms.push(transform(stamp, &odom_frame, &base_frame, &odom));
+        }
         self.push(t, Ros2Message::Tf(TfMessage { transforms }));
-        if let Some(o) = odometry {
+        if let Some(o) = odometry.filter(|_| !self.base_publishes_odometry) {
             self.push(
                 t,
                 Ros2Message::Odometry(Box::new(Odometry {
-                    header: header(ODOM_FRAME),
-                    child_frame_id: BASE_FRAME.into(),
+                    header: header(&odom_frame),
+                    child_frame_id: base_frame.clone(),
                     pose: PoseWithCovariance {
                         position: Vector3 {
                             x: o.x,
@@ -350,8 +400,8 @@ impl Ros2Outbox {
     }
 }
 
-/// A map snapshot as an OccupancyGrid in `map` (0 free, 100 occupied,
-/// −1 unknown), at [`MAP_RESOLUTION`] or coarser to stay within
+/// A map snapshot as an OccupancyGrid in the map frame (0 free, 100
+/// occupied, −1 unknown), at its resolution or coarser to stay within
 /// [`MAP_MAX_CELLS`]; `None` for an empty map.
 pub fn grid_message(snapshot: &MapSnapshot) -> Option<OccupancyGrid> {
     use crate::map::cls::grid::{FREE, OCCUPIED};
@@ -359,7 +409,7 @@ pub fn grid_message(snapshot: &MapSnapshot) -> Option<OccupancyGrid> {
         return None;
     }
     let mut cfg = GridConfig {
-        resolution: MAP_RESOLUTION,
+        resolution: snapshot.resolution,
         ..GridConfig::default()
     };
     let grid = loop {
@@ -374,7 +424,7 @@ pub fn grid_message(snapshot: &MapSnapshot) -> Option<OccupancyGrid> {
     Some(OccupancyGrid {
         header: Header {
             stamp: snapshot.stamp,
-            frame_id: MAP_FRAME.into(),
+            frame_id: snapshot.frame.clone(),
         },
         map_load_time: snapshot.stamp,
         resolution: grid.resolution as f32,
@@ -396,6 +446,76 @@ pub fn grid_message(snapshot: &MapSnapshot) -> Option<OccupancyGrid> {
             })
             .collect(),
     })
+}
+
+/// A map snapshot as lines for RViz and Foxglove: the walls (the CLS map's
+/// actual segments) solid, its frontiers (virtual segments) dashed, and the
+/// pose graph's loop edges; one marker each, replaced by the next message
+/// (an empty one is deleted).
+pub fn marker_message(snapshot: &MapSnapshot) -> MarkerArray {
+    let point = |p: [f64; 2]| Vector3 {
+        x: p[0],
+        y: p[1],
+        z: 0.0,
+    };
+    let walls: Vec<Vector3> = snapshot
+        .map
+        .actual_segments()
+        .flat_map(|s| [point(s.start()), point(s.end())])
+        .collect();
+    let mut frontiers = Vec::new();
+    for s in snapshot.map.virtual_segments() {
+        let (a, b) = (s.start(), s.end());
+        let length = s.length();
+        let mut from = 0.0;
+        while from < length {
+            let to = (from + DASH).min(length);
+            let at = |d: f64| {
+                [
+                    a[0] + (b[0] - a[0]) * d / length,
+                    a[1] + (b[1] - a[1]) * d / length,
+                ]
+            };
+            frontiers.extend([point(at(from)), point(at(to))]);
+            from = to + DASH_GAP;
+        }
+    }
+    let loops: Vec<Vector3> = snapshot
+        .loop_edges
+        .iter()
+        .flat_map(|&[a, b]| [point(a), point(b)])
+        .collect();
+    let rgba = |r, g, b| ColorRgba { r, g, b, a: 1.0 };
+    let marker = |id: i32, ns: &str, points: Vec<Vector3>, width: f64, color| Marker {
+        header: Header {
+            stamp: snapshot.stamp,
+            frame_id: snapshot.frame.clone(),
+        },
+        ns: ns.into(),
+        id,
+        kind: Marker::LINE_LIST,
+        action: if points.is_empty() {
+            Marker::DELETE
+        } else {
+            Marker::ADD
+        },
+        orientation: Quaternion::from_yaw(0.0),
+        scale: Vector3 {
+            x: width,
+            y: 0.0,
+            z: 0.0,
+        },
+        color,
+        points,
+        ..Marker::default()
+    };
+    MarkerArray {
+        markers: vec![
+            marker(0, "walls", walls, 0.05, rgba(0.1, 0.1, 0.1)),
+            marker(1, "frontiers", frontiers, 0.03, rgba(1.0, 0.55, 0.0)),
+            marker(2, "loop_edges", loops, 0.02, rgba(0.1, 0.7, 0.2)),
+        ],
+    }
 }
 
 #[cfg(test)]
@@ -423,7 +543,13 @@ mod tests {
 
     #[test]
     fn the_transforms_chain_to_the_pose() {
-        let mut out = Ros2Outbox::new(1_700_000_000.0, Pose2::new(0.2, 0.0, 0.0), 8.183);
+        let mut out = Ros2Outbox::new(
+            1_700_000_000.0,
+            Pose2::new(0.2, 0.0, 0.0),
+            8.183,
+            &Ros2Section::default(),
+            false,
+        );
         let pose = Pose2::new(3.0, -1.0, 0.7);
         let odom = Pose2::new(10.0, 4.0, -2.0);
         let cov = [[0.01, 0.0, 0.0], [0.0, 0.02, 0.0], [0.0, 0.0, 0.003]];
@@ -473,8 +599,117 @@ mod tests {
     }
 
     #[test]
+    fn frames_are_named_by_the_config_and_a_ros2_base_keeps_its_own_odometry() {
+        let settings = Ros2Section {
+            map_frame: "world".into(),
+            odom_frame: "r1/odom".into(),
+            base_frame: "r1/base".into(),
+            laser_frame: "r1/lms".into(),
+            ..Ros2Section::default()
+        };
+        let mut out = Ros2Outbox::new(0.0, Pose2::IDENTITY, 8.183, &settings, true);
+        let cov = [[0.0; 3]; 3];
+        out.scan(&scan(1.0), Pose2::new(1.0, 2.0, 0.3), &cov, None);
+        out.scan(
+            &scan(1.1),
+            Pose2::new(1.0, 2.0, 0.3),
+            &cov,
+            Some(Pose2::IDENTITY),
+        );
+        let all = out.take();
+        let topics: Vec<String> = all.iter().map(|m| m.message.topic()).collect();
+        // No /odom ever; no /tf without the base's odometry (map → odom
+        // would be a guess).
+        assert_eq!(
+            topics,
+            ["/tf_static", "/scan", "/pose", "/scan", "/pose", "/tf"]
+        );
+        let Ros2Message::TfStatic(tf) = &all[0].message else {
+            panic!()
+        };
+        assert_eq!(
+            (
+                tf.transforms[0].header.frame_id.as_str(),
+                tf.transforms[0].child_frame_id.as_str()
+            ),
+            ("r1/base", "r1/lms")
+        );
+        let Ros2Message::Tf(tf) = &all[5].message else {
+            panic!()
+        };
+        assert_eq!(tf.transforms.len(), 1, "odom → base is the driver's");
+        assert_eq!(
+            (
+                tf.transforms[0].header.frame_id.as_str(),
+                tf.transforms[0].child_frame_id.as_str()
+            ),
+            ("world", "r1/odom")
+        );
+        let Ros2Message::Pose(p) = &all[2].message else {
+            panic!()
+        };
+        assert_eq!(p.header.frame_id, "world");
+        let Ros2Message::Scan(s) = &all[1].message else {
+            panic!()
+        };
+        assert_eq!(s.header.frame_id, "r1/lms");
+    }
+
+    #[test]
+    fn the_map_goes_out_as_a_grid_and_as_lines_at_the_configured_rate() {
+        use crate::map::cls::{ClsLoop, ClsMapConfig, ClsSegment, ClsShape, SegmentMode};
+        let pts = [[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]];
+        let segments = (0..4)
+            .map(|i| {
+                let mut s = ClsSegment::virtual_between(pts[i], pts[(i + 1) % 4]);
+                if i != 1 {
+                    s.mode = SegmentMode::Actual;
+                }
+                s
+            })
+            .collect();
+        let shape = ClsShape {
+            outer: ClsLoop::new(segments),
+            holes: vec![],
+        };
+        let map = ClsMap::from_shapes(ClsMapConfig::default(), vec![shape]).unwrap();
+        let settings = Ros2Section {
+            map_interval: 2.0,
+            map_resolution: 0.1,
+            ..Ros2Section::default()
+        };
+        let mut out = Ros2Outbox::new(0.0, Pose2::IDENTITY, 8.183, &settings, false);
+        assert!(out.map_due(1, 0.0));
+        out.map(1, 0.0, map, vec![]);
+        assert!(!out.map_due(2, 1.9) && !out.map_due(1, 5.0) && out.map_due(2, 2.0));
+        let all = out.take();
+        let Ros2Message::Map(grid) = &all[0].message else {
+            panic!()
+        };
+        let grid = grid_message(grid).unwrap();
+        assert!((grid.resolution - 0.1).abs() < 1e-6);
+        let Ros2Message::ClsMap(lines) = &all[1].message else {
+            panic!()
+        };
+        let markers = marker_message(lines).markers;
+        assert_eq!(all[1].message.topic(), "/cls_map");
+        // Three walls solid (one line each); the 1 m frontier in dashes of
+        // 0.2 m every 0.3 m: 4 dashes; no loop edges: deleted.
+        assert_eq!(markers[0].points.len(), 3 * 2);
+        assert_eq!(markers[1].points.len(), 4 * 2);
+        let dash = &markers[1].points;
+        assert!(((dash[1].y - dash[0].y).abs() - DASH).abs() < 1e-9);
+        assert!(markers[..2].iter().all(|m| m.action == Marker::ADD));
+        assert_eq!(markers[2].action, Marker::DELETE);
+        assert!(markers.iter().all(|m| m.header.frame_id == "map"));
+        // It survives its own codec.
+        let cdr = all[1].message.encode().unwrap();
+        assert_eq!(MarkerArray::from_cdr(&cdr).unwrap().markers, markers);
+    }
+
+    #[test]
     fn a_shell_that_does_not_take_its_messages_bounds_them() {
-        let mut out = Ros2Outbox::new(0.0, Pose2::IDENTITY, 8.183);
+        let mut out = Ros2Outbox::new(0.0, Pose2::IDENTITY, 8.183, &Ros2Section::default(), false);
         for k in 0..200 {
             out.scan(&scan(f64::from(k)), Pose2::IDENTITY, &[[0.0; 3]; 3], None);
         }

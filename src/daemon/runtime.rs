@@ -33,7 +33,7 @@ use super::latency::StageSummary;
 use super::live::{LiveMapper, LiveStatus};
 use super::notify::Notifier;
 use super::run_dir::RunDirs;
-use super::sensor::{ScanSlot, SensorOptions, SensorReport, SensorThread};
+use super::sensor::{RawTelegrams, ScanSlot, SensorOptions, SensorReport, SensorThread};
 use crate::error_chain;
 use crate::geometry::Pose2;
 use crate::graph::OptimisationResult;
@@ -293,6 +293,21 @@ fn build_rig(config: &DaemonConfig, t0: Instant) -> Result<Rig, DaemonError> {
                     .map_err(|e| e.to_string())
             }))
         }
+        #[cfg(feature = "dds")]
+        BaseKind::Ros2 => {
+            let (ros2, base) = (config.ros2.clone(), config.base.clone());
+            let epoch = lms200::driver::unix_micros() as f64 / 1e6 - t0.elapsed().as_secs_f64();
+            Some(Box::new(move || {
+                super::ros2_base::Ros2Base::start(&ros2, &base, t0, epoch)
+                    .map(|b| Box::new(b) as Box<dyn BaseAdapter + Send>)
+            }))
+        }
+        #[cfg(not(feature = "dds"))]
+        BaseKind::Ros2 => {
+            return Err(DaemonError::NoSimulator(
+                "[base] adapter = \"ros2\" needs the `dds` feature",
+            ));
+        }
         BaseKind::Replay => {
             let path = config.base.replay.clone().unwrap_or_default();
             let samples = replay_samples(&path).map_err(|source| DaemonError::Replay {
@@ -400,6 +415,8 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     let mut rig = build_rig(&config, t0)?;
     let (scan_tx, mut scan_rx) = watch::channel::<Option<ScanSlot>>(None);
     let (report_tx, mut report_rx) = mpsc::unbounded_channel();
+    // The run's bag holds the serial stream too.
+    let raw_telegrams = config.daemon.bag.then(RawTelegrams::default);
     let sensor = SensorThread::spawn(
         SensorOptions {
             port: rig.sensor_port.clone(),
@@ -407,6 +424,7 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
             retry_initial: Duration::from_secs_f64(config.sensor.retry_initial),
             retry_max: Duration::from_secs_f64(config.sensor.retry_max),
             record: config.sensor.record.clone(),
+            raw: raw_telegrams.clone(),
         },
         scan_tx,
         report_tx,
@@ -431,7 +449,11 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
         true => {
             let (tx, rx) = mpsc::unbounded_channel();
             (
-                Some(super::dds_sink::DdsSink::start(&config.ros2, tx)?),
+                Some(super::dds_sink::DdsSink::start(
+                    &config.ros2,
+                    config.base.adapter == BaseKind::Ros2,
+                    tx,
+                )?),
                 Some(rx),
             )
         }
@@ -538,7 +560,8 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
             .any(|m| matches!(m.message, super::ros2_out::Ros2Message::Scan(_)));
         if write_bag && bag.is_none() && has_scan && !bag_failed {
             let started = dirs.out_dir().map_err(|e| e.to_string()).and_then(|d| {
-                BagSink::start(&d.join(BAG_FILE)).map_err(|e| crate::error_chain(&e))
+                BagSink::start(&d.join(BAG_FILE), raw_telegrams.clone())
+                    .map_err(|e| crate::error_chain(&e))
             });
             match started {
                 Ok(sink) => bag = Some(sink),

@@ -11,10 +11,11 @@
 //! streaming and returns to 9600 Bd.
 
 use std::fs::OpenOptions;
+use std::io::Write;
 use std::ops::ControlFlow;
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -24,6 +25,7 @@ use tokio::sync::{mpsc, watch};
 use tracing::{error, info, warn};
 
 use crate::error_chain;
+use crate::files::tee::Tee;
 
 /// A scan in the mailbox, numbered so the reader of the mailbox can count
 /// the scans it never saw.
@@ -53,6 +55,89 @@ pub struct SensorOptions {
     /// Record the raw stream here (a new file per connection: `-1`, `-2`
     /// … are appended when the name exists).
     pub record: Option<PathBuf>,
+    /// Record the raw stream into this buffer too (for the run's bag).
+    pub raw: Option<RawTelegrams>,
+}
+
+/// The recording of the serial stream (the `.rec` format) as it grows,
+/// for a reader on another thread (the bag's `/lms200/recording`): all
+/// connections in one stream, so the bytes taken, put end to end, are one
+/// recording. Bounded: bytes no reader took are dropped and counted
+/// beyond [`RawTelegrams::CAPACITY`].
+#[derive(Debug, Clone, Default)]
+pub struct RawTelegrams(Arc<Mutex<RawBuffer>>);
+
+#[derive(Debug, Default)]
+struct RawBuffer {
+    bytes: Vec<u8>,
+    connections: u64,
+    dropped: u64,
+}
+
+impl RawTelegrams {
+    /// Bytes held for the reader at most (about a minute of 500 kBd).
+    pub const CAPACITY: usize = 4 << 20;
+
+    /// The bytes written since the last call, and how many were dropped
+    /// meanwhile (the reader fell behind).
+    pub fn take(&self) -> (Vec<u8>, u64) {
+        self.0
+            .lock()
+            .map(|mut b| (std::mem::take(&mut b.bytes), std::mem::take(&mut b.dropped)))
+            .unwrap_or_default()
+    }
+
+    /// A writer for one connection's recording. A recording starts with
+    /// its 8-byte magic; every connection after the first leaves it out,
+    /// so the records continue the first connection's stream.
+    fn connection(&self) -> RawConnection {
+        let skip = self
+            .0
+            .lock()
+            .map(|mut b| {
+                b.connections += 1;
+                if b.connections > 1 {
+                    lms200::recording::MAGIC.len()
+                } else {
+                    0
+                }
+            })
+            .unwrap_or(0);
+        RawConnection {
+            buffer: self.clone(),
+            skip,
+        }
+    }
+}
+
+/// One connection's writer into [`RawTelegrams`].
+struct RawConnection {
+    buffer: RawTelegrams,
+    /// Bytes still to leave out (the magic).
+    skip: usize,
+}
+
+impl Write for RawConnection {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let skipped = self.skip.min(buf.len());
+        self.skip -= skipped;
+        let rest = &buf[skipped..];
+        let mut b = self
+            .buffer
+            .0
+            .lock()
+            .map_err(|_| std::io::Error::other("raw telegram buffer poisoned"))?;
+        if b.bytes.len() + rest.len() > RawTelegrams::CAPACITY {
+            b.dropped += rest.len() as u64;
+        } else {
+            b.bytes.extend_from_slice(rest);
+        }
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
 }
 
 /// The running sensor thread.
@@ -118,10 +203,7 @@ fn run(
         let mut streamed = false;
         let result = SerialDriver::open(&options.port, options.link.clone())
             .map_err(DriverError::from_open)
-            .and_then(|driver| match record.as_deref() {
-                Some(path) => attach_recording(driver, path, &options),
-                None => Ok(driver),
-            })
+            .and_then(|driver| attach_recording(driver, record.as_deref(), &options))
             .and_then(|mut driver| {
                 info!(port = %options.port.display(), "serial port open");
                 driver
@@ -195,14 +277,37 @@ impl DriverError {
     }
 }
 
-/// Adds a recording in a new file next to `path` (`-1`, `-2` … appended
-/// when the name exists); the port is opened again if the recording cannot
-/// be started.
+/// Adds the recording: into a new file next to `path` (`-1`, `-2` …
+/// appended when the name exists) and into the options' buffer, either or
+/// both; the port is opened again if the recording cannot be started.
 fn attach_recording(
     driver: SerialDriver,
-    path: &std::path::Path,
+    path: Option<&std::path::Path>,
     options: &SensorOptions,
 ) -> Result<SerialDriver, DriverError> {
+    let mut sinks: Vec<Box<dyn Write + Send>> = Vec::new();
+    if let Some(path) = path {
+        sinks.push(Box::new(std::io::BufWriter::new(new_recording_file(path)?)));
+    }
+    if let Some(raw) = &options.raw {
+        sinks.push(Box::new(raw.connection()));
+    }
+    if sinks.is_empty() {
+        return Ok(driver);
+    }
+    driver
+        .with_recording(
+            Box::new(Tee(sinks)),
+            &format!(
+                "clsmap run; mode={:02x}",
+                options.link.measuring_mode.code()
+            ),
+        )
+        .map_err(DriverError::from_run)
+}
+
+/// A new file at `path`, or next to it.
+fn new_recording_file(path: &std::path::Path) -> Result<std::fs::File, DriverError> {
     let file = (0..1000)
         .map(|k| {
             if k == 0 {
@@ -228,13 +333,53 @@ fn attach_recording(
         )));
     };
     info!(path = %p.display(), "recording the telegram stream");
-    driver
-        .with_recording(
-            Box::new(std::io::BufWriter::new(file)),
-            &format!(
-                "clsmap run; mode={:02x}",
-                options.link.measuring_mode.code()
-            ),
-        )
-        .map_err(DriverError::from_run)
+    Ok(file)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use lms200::recording::{Record, RecordingReader, RecordingWriter};
+
+    fn connection_bytes(raw: &RawTelegrams, note: &str) {
+        let mut w = RecordingWriter::new(raw.connection()).unwrap();
+        w.write(&Record::Note {
+            t_us: 1,
+            text: note.into(),
+        })
+        .unwrap();
+    }
+
+    #[test]
+    fn every_connection_continues_one_recording() {
+        let raw = RawTelegrams::default();
+        connection_bytes(&raw, "first");
+        let (mut bytes, dropped) = raw.take();
+        connection_bytes(&raw, "second");
+        bytes.extend(raw.take().0);
+        assert_eq!(dropped, 0);
+        let notes: Vec<String> = RecordingReader::new(&bytes[..])
+            .unwrap()
+            .map(|r| match r.unwrap() {
+                Record::Note { text, .. } => text,
+                other => panic!("{other:?}"),
+            })
+            .collect();
+        assert_eq!(notes, ["first", "second"]);
+    }
+
+    #[test]
+    fn bytes_no_one_takes_are_dropped_and_counted() {
+        let raw = RawTelegrams::default();
+        let mut w = raw.connection();
+        let block = vec![0u8; 1 << 20];
+        for _ in 0..6 {
+            w.write_all(&block).unwrap();
+        }
+        let (bytes, dropped) = raw.take();
+        assert_eq!(bytes.len(), RawTelegrams::CAPACITY);
+        assert_eq!(dropped, 2 << 20);
+        assert_eq!(raw.take(), (vec![], 0));
+    }
 }

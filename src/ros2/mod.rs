@@ -7,7 +7,7 @@ pub mod msg;
 
 pub use cdr::{CdrError, CdrReader, CdrWriter};
 pub use msg::{
-    ByteArray, DiagnosticArray, DiagnosticStatus, Header, LaserScan, OccupancyGrid, Odometry,
-    PoseWithCovariance, PoseWithCovarianceStamped, Quaternion, RosMessage, TfMessage, Time,
-    TransformStamped, Twist, Vector3,
+    ByteArray, ColorRgba, DiagnosticArray, DiagnosticStatus, Header, LaserScan, Marker,
+    MarkerArray, OccupancyGrid, Odometry, PoseWithCovariance, PoseWithCovarianceStamped,
+    Quaternion, RosMessage, TfMessage, Time, TransformStamped, Twist, Vector3,
 };

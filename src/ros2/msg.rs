@@ -118,6 +118,38 @@ const FIELDS: &[(&str, &str)] = &[
         "std_msgs/UInt8MultiArray",
         "std_msgs/MultiArrayLayout layout\nuint8[] data\n",
     ),
+    ("builtin_interfaces/Duration", "int32 sec\nuint32 nanosec\n"),
+    (
+        "std_msgs/ColorRGBA",
+        "float32 r\nfloat32 g\nfloat32 b\nfloat32 a\n",
+    ),
+    (
+        "sensor_msgs/CompressedImage",
+        "std_msgs/Header header\nstring format\nuint8[] data\n",
+    ),
+    ("visualization_msgs/UVCoordinate", "float32 u\nfloat32 v\n"),
+    (
+        "visualization_msgs/MeshFile",
+        "string filename\nuint8[] data\n",
+    ),
+    (
+        "visualization_msgs/Marker",
+        "int32 ARROW=0\nint32 CUBE=1\nint32 SPHERE=2\nint32 CYLINDER=3\nint32 LINE_STRIP=4\n\
+         int32 LINE_LIST=5\nint32 CUBE_LIST=6\nint32 SPHERE_LIST=7\nint32 POINTS=8\n\
+         int32 TEXT_VIEW_FACING=9\nint32 MESH_RESOURCE=10\nint32 TRIANGLE_LIST=11\n\
+         int32 ARROW_STRIP=12\nint32 ADD=0\nint32 MODIFY=0\nint32 DELETE=2\nint32 DELETEALL=3\n\
+         std_msgs/Header header\nstring ns\nint32 id\nint32 type\nint32 action\n\
+         geometry_msgs/Pose pose\ngeometry_msgs/Vector3 scale\nstd_msgs/ColorRGBA color\n\
+         builtin_interfaces/Duration lifetime\nbool frame_locked\ngeometry_msgs/Point[] points\n\
+         std_msgs/ColorRGBA[] colors\nstring texture_resource\n\
+         sensor_msgs/CompressedImage texture\nvisualization_msgs/UVCoordinate[] uv_coordinates\n\
+         string text\nstring mesh_resource\nvisualization_msgs/MeshFile mesh_file\n\
+         bool mesh_use_embedded_materials\n",
+    ),
+    (
+        "visualization_msgs/MarkerArray",
+        "visualization_msgs/Marker[] markers\n",
+    ),
 ];
 
 fn fields_of(name: &str) -> &'static str {
@@ -414,10 +446,11 @@ impl Default for PoseWithCovariance {
 
 /// `geometry_msgs/TwistWithCovariance`: linear and angular velocity and
 /// their 6×6 covariance.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 pub struct TwistWithCovariance {
     pub linear: Vector3,
     pub angular: Vector3,
+    #[serde(deserialize_with = "covariance_36")]
     pub covariance: [f64; 36],
 }
 
@@ -433,7 +466,7 @@ impl Default for TwistWithCovariance {
 
 /// `nav_msgs/Odometry`: the pose of `child_frame_id` in `header.frame_id`
 /// and its velocity in `child_frame_id`.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
 pub struct Odometry {
     pub header: Header,
     pub child_frame_id: String,
@@ -729,6 +762,172 @@ impl RosMessage for ByteArray {
         }
         r.u32()?;
         Ok(ByteArray { data: r.u8_seq()? })
+    }
+
+    fn definition() -> String {
+        schema(Self::TYPE)
+    }
+}
+
+/// `std_msgs/ColorRGBA`: red, green, blue and opacity, each 0–1.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ColorRgba {
+    pub r: f32,
+    pub g: f32,
+    pub b: f32,
+    pub a: f32,
+}
+
+impl ColorRgba {
+    fn write(&self, w: &mut CdrWriter) {
+        for v in [self.r, self.g, self.b, self.a] {
+            w.f32(v);
+        }
+    }
+
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        Ok(ColorRgba {
+            r: r.f32()?,
+            g: r.f32()?,
+            b: r.f32()?,
+            a: r.f32()?,
+        })
+    }
+}
+
+/// `visualization_msgs/Marker`, the fields a drawing of lines uses; the
+/// texture, UV coordinates and mesh file (for meshes) are written empty
+/// and skipped when read. Its layout is the one of Humble's later
+/// releases and every distribution since.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Marker {
+    pub header: Header,
+    pub ns: String,
+    pub id: i32,
+    /// The definition's `type`: [`Marker::LINE_LIST`], ….
+    pub kind: i32,
+    /// [`Marker::ADD`] or [`Marker::DELETE`].
+    pub action: i32,
+    pub position: Vector3,
+    pub orientation: Quaternion,
+    /// For lines, `scale.x` is their width (m).
+    pub scale: Vector3,
+    pub color: ColorRgba,
+    /// How long it stays (s, ns); zero: until replaced.
+    pub lifetime: Time,
+    pub frame_locked: bool,
+    pub points: Vec<Vector3>,
+    pub colors: Vec<ColorRgba>,
+    pub text: String,
+    pub mesh_resource: String,
+    pub mesh_use_embedded_materials: bool,
+}
+
+impl Marker {
+    pub const LINE_LIST: i32 = 5;
+    pub const ADD: i32 = 0;
+    pub const DELETE: i32 = 2;
+
+    fn write(&self, w: &mut CdrWriter) {
+        self.header.write(w);
+        w.string(&self.ns);
+        w.i32(self.id);
+        w.i32(self.kind);
+        w.i32(self.action);
+        self.position.write(w);
+        self.orientation.write(w);
+        self.scale.write(w);
+        self.color.write(w);
+        self.lifetime.write(w);
+        w.bool(self.frame_locked);
+        w.count(self.points.len());
+        for p in &self.points {
+            p.write(w);
+        }
+        w.count(self.colors.len());
+        for c in &self.colors {
+            c.write(w);
+        }
+        w.string(""); // texture_resource
+        Header::default().write(w); // texture: header, format, data
+        w.string("");
+        w.u8_seq(&[]);
+        w.count(0); // uv_coordinates
+        w.string(&self.text);
+        w.string(&self.mesh_resource);
+        w.string(""); // mesh_file: filename, data
+        w.u8_seq(&[]);
+        w.bool(self.mesh_use_embedded_materials);
+    }
+
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        let header = Header::read(r)?;
+        let ns = r.string()?;
+        let (id, kind, action) = (r.i32()?, r.i32()?, r.i32()?);
+        let (position, orientation) = (Vector3::read(r)?, Quaternion::read(r)?);
+        let (scale, color, lifetime) = (Vector3::read(r)?, ColorRgba::read(r)?, Time::read(r)?);
+        let frame_locked = r.bool()?;
+        let n = r.count(24)?;
+        let points = (0..n).map(|_| Vector3::read(r)).collect::<Result<_, _>>()?;
+        let n = r.count(16)?;
+        let colors = (0..n)
+            .map(|_| ColorRgba::read(r))
+            .collect::<Result<_, _>>()?;
+        r.string()?;
+        Header::read(r)?;
+        r.string()?;
+        r.u8_seq()?;
+        let n = r.count(8)?;
+        for _ in 0..n {
+            r.f32()?;
+            r.f32()?;
+        }
+        let text = r.string()?;
+        let mesh_resource = r.string()?;
+        r.string()?;
+        r.u8_seq()?;
+        Ok(Marker {
+            header,
+            ns,
+            id,
+            kind,
+            action,
+            position,
+            orientation,
+            scale,
+            color,
+            lifetime,
+            frame_locked,
+            points,
+            colors,
+            text,
+            mesh_resource,
+            mesh_use_embedded_materials: r.bool()?,
+        })
+    }
+}
+
+/// `visualization_msgs/MarkerArray`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct MarkerArray {
+    pub markers: Vec<Marker>,
+}
+
+impl RosMessage for MarkerArray {
+    const TYPE: &'static str = "visualization_msgs/msg/MarkerArray";
+
+    fn write(&self, w: &mut CdrWriter) {
+        w.count(self.markers.len());
+        for m in &self.markers {
+            m.write(w);
+        }
+    }
+
+    fn read(r: &mut CdrReader<'_>) -> Result<Self, CdrError> {
+        // A marker is at least 100 bytes (its fixed fields alone).
+        let n = r.count(100)?;
+        let markers = (0..n).map(|_| Marker::read(r)).collect::<Result<_, _>>()?;
+        Ok(MarkerArray { markers })
     }
 
     fn definition() -> String {

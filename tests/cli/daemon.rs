@@ -361,7 +361,8 @@ fn run_with_a_bag(dir: &TempDir) -> PathBuf {
 /// The daemon's bag holds, for every scan, the scan, the pose estimate,
 /// the odometry and the transforms map → odom → base_link that chain to
 /// the pose, and base_link → laser once; the poses are those of
-/// trajectory.tum.
+/// trajectory.tum; the map as a grid and as lines; and the serial stream,
+/// whose bytes put end to end are a recording holding every scan.
 #[test]
 fn run_writes_a_rosbag2_bag_whose_transforms_chain_to_its_poses() {
     use clsmap::ros2::bag::BagReader;
@@ -370,12 +371,16 @@ fn run_writes_a_rosbag2_bag_whose_transforms_chain_to_its_poses() {
     let run = run_with_a_bag(&dir);
     let (mut poses, mut tfs, mut counts) =
         (Vec::new(), Vec::new(), std::collections::BTreeMap::new());
+    let mut recording = Vec::new();
     for m in BagReader::open(&run.join("run.mcap")).unwrap() {
         let m = m.unwrap();
         *counts.entry(m.topic.topic.clone()).or_insert(0usize) += 1;
         match m.topic.topic.as_str() {
             "/pose" => poses.push(PoseWithCovarianceStamped::from_cdr(&m.data).unwrap()),
             "/tf" => tfs.push(TfMessage::from_cdr(&m.data).unwrap()),
+            "/lms200/recording" => {
+                recording.extend(clsmap::ros2::ByteArray::from_cdr(&m.data).unwrap().data);
+            }
             _ => {}
         }
     }
@@ -383,6 +388,17 @@ fn run_writes_a_rosbag2_bag_whose_transforms_chain_to_its_poses() {
     assert!(scans > 20, "{counts:?}");
     assert_eq!(counts["/tf_static"], 1, "{counts:?}");
     assert!(counts.get("/map").is_some_and(|&n| n >= 1), "{counts:?}");
+    assert_eq!(counts.get("/map"), counts.get("/cls_map"), "{counts:?}");
+    // The raw stream carries every scan the loop saw, and those it
+    // skipped (the sensor streams faster than a debug build maps).
+    let raw_scans = clsmap::input::lms200::RecordingScans::new(&recording[..])
+        .unwrap()
+        .filter(|s| s.is_ok())
+        .count();
+    assert!(
+        raw_scans >= scans,
+        "{raw_scans} scans in the raw stream, {scans} on /scan"
+    );
     // The demo's status line comes every second.
     assert!(
         counts.get("/diagnostics").is_some_and(|&n| n >= 1),
@@ -446,6 +462,8 @@ fn an_independent_reader_decodes_every_message_of_the_daemon_s_bag() {
         ("/tf_static", "tf2_msgs/msg/TFMessage"),
         ("/map", "nav_msgs/msg/OccupancyGrid"),
         ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"),
+        ("/cls_map", "visualization_msgs/msg/MarkerArray"),
+        ("/lms200/recording", "std_msgs/msg/UInt8MultiArray"),
     ] {
         assert_eq!(report["topics"][topic]["type"], ty, "{report}");
         assert!(
@@ -454,14 +472,17 @@ fn an_independent_reader_decodes_every_message_of_the_daemon_s_bag() {
         );
     }
     assert_eq!(report["scan_stamps_increase"], true, "{report}");
+    // The raw stream starts as a recording does ("CLSMREC", version 1).
+    assert_eq!(report["recording_head"], "434c534d52454301", "{report}");
 }
 
 /// The daemon as a ROS 2 node, seen from an independent DDS stack (PyPI
 /// `cyclonedds`, `scripts/ros2_subscriber.py`, with the message layouts
 /// written there from the ROS 2 definitions): a subscriber that joins
 /// after the start gets /scan, /pose, /tf and, transient-local, the
-/// /tf_static sent at the first scan and the latest /map; frames as REP
-/// 105, stamps on the wall clock.
+/// /tf_static sent at the first scan and the latest /map and /cls_map;
+/// frames as REP 105, stamps on the wall clock. Both sides keep DDS on the
+/// loopback interface.
 #[test]
 #[ignore = "needs PyPI cyclonedds; CI runs it: cargo test --test cli -- --ignored"]
 fn an_independent_dds_subscriber_sees_the_daemon_s_topics() {
@@ -470,7 +491,7 @@ fn an_independent_dds_subscriber_sees_the_daemon_s_topics() {
     let domain = 100 + std::process::id() % 100;
     let config = demo_run_config(
         &dir,
-        &format!("[ros2]\nenabled = true\ndomain_id = {domain}\n"),
+        &format!("[ros2]\nenabled = true\nlocalhost_only = true\ndomain_id = {domain}\n"),
     );
     let mut daemon = Daemon::start(&config);
     daemon.wait_for("ROS 2 node up", Duration::from_secs(60));
@@ -486,6 +507,7 @@ fn an_independent_dds_subscriber_sees_the_daemon_s_topics() {
             "1",
             "--timeout",
             "60",
+            "--localhost",
         ])
         .output()
         .unwrap();
@@ -526,6 +548,14 @@ fn an_independent_dds_subscriber_sees_the_daemon_s_topics() {
         report["tf_static"],
         serde_json::json!([["base_link", "laser"]])
     );
+    // Walls and frontiers as line lists in the map frame.
+    let lines = &report["cls_map"];
+    for ns in ["walls", "frontiers"] {
+        assert_eq!(lines[ns]["frame_id"], "map", "{report}");
+        assert_eq!(lines[ns]["type"], 5, "{report}");
+        assert!(lines[ns]["points"].as_u64().unwrap() >= 2, "{report}");
+    }
+    assert!(lines["loop_edges"].is_object(), "{report}");
 }
 
 /// A ROS 2 teleop on the independent DDS stack drives the robot: with
@@ -576,4 +606,71 @@ fn cmd_vel_from_an_independent_dds_publisher_drives_the_base() {
     let moved = d["dx"].as_f64().unwrap().hypot(d["dy"].as_f64().unwrap());
     // 0.2 m/s for 3 s, less the start and the stop.
     assert!((0.3..0.8).contains(&moved), "moved {moved:.3} m: {report}");
+}
+
+/// A base behind its own ROS 2 driver (`[base] adapter = "ros2"`), the
+/// driver on an independent DDS stack (`scripts/ros2_base.py`: PyPI
+/// `cyclonedds`, integrating /cmd_vel into /odom at 50 Hz like a holonomic
+/// base's driver node): exploration drives it through /cmd_vel within the
+/// speed limit; when the driver's odometry stops, the base gets a stop
+/// within the stale-odometry guard (0.5 s) and nothing moving until the
+/// odometry is back; then it drives again. The scans come from `clsmap
+/// emulate` on a pseudo-terminal, DDS stays on the loopback interface.
+#[test]
+#[ignore = "needs PyPI cyclonedds; CI runs it: cargo test --test cli -- --ignored"]
+fn a_ros2_base_driver_is_driven_and_stopped_when_its_odometry_stops() {
+    let dir = TempDir::new("run-ros2-base");
+    let link = dir.join("lms200");
+    let emulator = super::emulator::EmulatorProcess::start(&dir, &link);
+    let domain = 100 + (std::process::id() + 25) % 100;
+    let config = dir.join("clsmap.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[sensor]\nsource = \"serial\"\nport = {:?}\n\n[base]\nadapter = \"ros2\"\n\n\
+             [exploration]\nenabled = true\n\n[daemon]\nstate_dir = {:?}\n\n\
+             [ros2]\nlocalhost_only = true\ndomain_id = {domain}\n",
+            link.display().to_string(),
+            dir.join("state").display().to_string()
+        ),
+    )
+    .unwrap();
+    let mut daemon = Daemon::start(&config);
+    daemon.wait_for("base connected", Duration::from_secs(60));
+    let python = std::env::var("CLSMAP_PYTHON").unwrap_or_else(|_| "python3".into());
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/ros2_base.py");
+    let out = Command::new(&python)
+        .arg(&script)
+        .args(["--domain", &domain.to_string(), "--localhost"])
+        .args(["--seconds", "14", "--silent-at", "5", "--silent-for", "3"])
+        .output()
+        .unwrap();
+    daemon.signal("TERM");
+    let (status, _, stderr) = daemon.finish(Duration::from_secs(30));
+    assert!(status.success(), "{status}\n{stderr}");
+    drop(emulator);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{python} {}: {stdout}\n{}\n(needs PyPI cyclonedds: set CLSMAP_PYTHON to a Python that has it)",
+        script.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    let moving = report["moving"].as_u64().unwrap();
+    let fastest = report["fastest"].as_f64().unwrap();
+    assert!(moving > 50, "{report}\n{stderr}");
+    // Within [base] max_speed (1 m/s) and the drive's cruise (0.5 m/s).
+    assert!(fastest > 0.05 && fastest <= 0.5 + 1e-6, "{report}");
+    assert!(report["driven"].as_f64().unwrap() > 0.3, "{report}");
+    let silence = &report["silence"];
+    let stop = silence["first_stop_after"].as_f64();
+    assert!(stop.is_some_and(|t| t < 0.5 + 0.3), "{report}\n{stderr}");
+    let last_moving = silence["last_moving_after"].as_f64().unwrap_or(0.0);
+    assert!(last_moving < 0.5 + 0.1, "{report}");
+    assert!(
+        report["moving_after_silence"].as_u64().unwrap() > 10,
+        "{report}"
+    );
+    assert!(stderr.contains("no odometry on /odom"), "{stderr}");
 }

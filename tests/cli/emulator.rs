@@ -3,14 +3,14 @@
 use super::*;
 
 /// A running `clsmap emulate`; killed if the test ends without stopping it.
-struct EmulatorProcess {
+pub(super) struct EmulatorProcess {
     child: Child,
     stdout: PathBuf,
     stderr: PathBuf,
 }
 
 impl EmulatorProcess {
-    fn start(dir: &TempDir, link: &Path) -> EmulatorProcess {
+    pub(super) fn start(dir: &TempDir, link: &Path) -> EmulatorProcess {
         Self::start_with(dir, link, &[])
     }
 

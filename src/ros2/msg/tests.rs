@@ -163,8 +163,80 @@ fn byte_array() -> ByteArray {
     }
 }
 
+fn twist() -> Twist {
+    Twist {
+        linear: Vector3 {
+            x: 0.25,
+            y: -0.125,
+            z: 0.0,
+        },
+        angular: Vector3 {
+            x: 0.0,
+            y: 0.0,
+            z: 0.5,
+        },
+    }
+}
+
+fn marker_array() -> MarkerArray {
+    let marker = |ns: &str, id, action, points: &[(f64, f64)], color, width, text: &str| Marker {
+        header: header(13, 9, "map"),
+        ns: ns.into(),
+        id,
+        kind: Marker::LINE_LIST,
+        action,
+        orientation: Quaternion::from_yaw(0.0),
+        scale: Vector3 {
+            x: width,
+            y: 0.0,
+            z: 0.0,
+        },
+        color,
+        points: points
+            .iter()
+            .map(|&(x, y)| Vector3 { x, y, z: 0.0 })
+            .collect(),
+        text: text.into(),
+        ..Marker::default()
+    };
+    MarkerArray {
+        markers: vec![
+            marker(
+                "walls",
+                0,
+                Marker::ADD,
+                &[(0.5, 1.0), (2.5, -1.25)],
+                ColorRgba {
+                    r: 0.1,
+                    g: 0.1,
+                    b: 0.1,
+                    a: 1.0,
+                },
+                0.05,
+                "w",
+            ),
+            marker(
+                "frontiers",
+                1,
+                Marker::DELETE,
+                &[],
+                ColorRgba {
+                    r: 1.0,
+                    g: 0.5,
+                    b: 0.0,
+                    a: 0.75,
+                },
+                0.0,
+                "",
+            ),
+        ],
+    }
+}
+
 #[test]
 fn messages_match_the_independent_serializer() {
+    assert_eq!(twist().to_cdr(), golden("twist"));
+    assert_eq!(marker_array().to_cdr(), golden("marker_array"));
     assert_eq!(laser_scan().to_cdr(), golden("laser_scan"));
     assert_eq!(odometry().to_cdr(), golden("odometry"));
     assert_eq!(tf_message().to_cdr(), golden("tf_message"));
@@ -191,6 +263,11 @@ fn the_independent_serializer_s_bytes_read_back() {
     assert_eq!(
         ByteArray::from_cdr(&golden("byte_array")).unwrap(),
         byte_array()
+    );
+    assert_eq!(Twist::from_cdr(&golden("twist")).unwrap(), twist());
+    assert_eq!(
+        MarkerArray::from_cdr(&golden("marker_array")).unwrap(),
+        marker_array()
     );
 }
 
@@ -255,5 +332,6 @@ proptest! {
         let _ = Odometry::from_cdr(&bytes);
         let _ = LaserScan::from_cdr(&bytes);
         let _ = TfMessage::from_cdr(&bytes);
+        let _ = MarkerArray::from_cdr(&bytes);
     }
 }
