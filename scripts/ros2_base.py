@@ -5,7 +5,10 @@ to /cmd_vel (geometry_msgs/Twist, robot frame), integrates the commanded
 velocity, and publishes nav_msgs/Odometry on /odom at 50 Hz (frame odom,
 child base_link, stamped on the wall clock).
 
-    python3 scripts/ros2_base.py --domain 0 --seconds 20 [--silent-at 10 --silent-for 3] [--localhost]
+    python3 scripts/ros2_base.py --domain 0 --seconds 20 [--silent-at 10 --silent-for 3] [--localhost] [--tf]
+
+With --tf the odometry goes out as the transform odom -> base_link on /tf
+(tf2_msgs/TFMessage) instead, as drivers that publish only TF do.
 
 With --silent-at T it stops publishing odometry T seconds after the first
 command arrives, for --silent-for seconds, as a driver that hangs would,
@@ -35,7 +38,10 @@ from ros2_types import (  # noqa: E402
     Pose,
     PoseWithCovariance,
     Quaternion,
+    TFMessage,
     Time,
+    Transform,
+    TransformStamped,
     Twist,
     TwistWithCovariance,
     Vector3,
@@ -61,6 +67,7 @@ def main():
     ap.add_argument("--silent-at", type=float, default=None)
     ap.add_argument("--silent-for", type=float, default=3.0)
     ap.add_argument("--localhost", action="store_true")
+    ap.add_argument("--tf", action="store_true", help="odometry as odom -> base_link on /tf")
     a = ap.parse_args()
     if a.localhost:
         localhost_only()
@@ -70,7 +77,10 @@ def main():
         Policy.Durability.Volatile,
         Policy.History.KeepLast(10),
     )
-    odom = DataWriter(dp, Topic(dp, "rt/odom", Odometry), qos=qos)
+    if a.tf:
+        odom = DataWriter(dp, Topic(dp, "rt/tf", TFMessage), qos=qos)
+    else:
+        odom = DataWriter(dp, Topic(dp, "rt/odom", Odometry), qos=qos)
     cmd = DataReader(dp, Topic(dp, "rt/cmd_vel", Twist), qos=qos)
     x = y = theta = 0.0
     vel = Twist(linear=Vector3(0.0, 0.0, 0.0), angular=Vector3(0.0, 0.0, 0.0))
@@ -104,9 +114,17 @@ def main():
         if now >= next_odom and not silent:
             next_odom = now + 1.0 / RATE
             q = Quaternion(x=0.0, y=0.0, z=math.sin(theta / 2), w=math.cos(theta / 2))
-            odom.write(
-                Odometry(
-                    header=Header(stamp=stamp(time.time()), frame_id="odom"),
+            header = Header(stamp=stamp(time.time()), frame_id="odom")
+            if a.tf:
+                tf = Transform(translation=Vector3(x, y, 0.0), rotation=q)
+                message = TFMessage(
+                    transforms=[
+                        TransformStamped(header=header, child_frame_id="base_link", transform=tf)
+                    ]
+                )
+            else:
+                message = Odometry(
+                    header=header,
                     child_frame_id="base_link",
                     pose=PoseWithCovariance(
                         pose=Pose(position=Point(x=x, y=y, z=0.0), orientation=q),
@@ -114,7 +132,7 @@ def main():
                     ),
                     twist=TwistWithCovariance(twist=vel, covariance=[0.0] * 36),
                 )
-            )
+            odom.write(message)
         time.sleep(0.005)
     report = {
         "commands": len(heard),

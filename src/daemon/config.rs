@@ -270,6 +270,10 @@ pub struct BaseConfig {
     /// (geometry_msgs/Twist) topics (defaults /odom, /cmd_vel).
     pub odom_topic: String,
     pub cmd_vel_topic: String,
+    /// `ros2`: odometry from `/tf` instead (the transform `[ros2]
+    /// odom_frame` → `base_frame`), for a driver that publishes only that
+    /// (default false).
+    pub odom_from_tf: bool,
     /// `replay`: the recording or CARMEN log whose odometry is played.
     pub replay: Option<PathBuf>,
     /// Odometry polls and velocity commands per second (default 50 Hz).
@@ -294,6 +298,7 @@ impl Default for BaseConfig {
             baud: 115_200,
             odom_topic: "/odom".into(),
             cmd_vel_topic: "/cmd_vel".into(),
+            odom_from_tf: false,
             replay: None,
             rate: 50.0,
             stale_odometry: 0.5,

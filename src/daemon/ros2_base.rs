@@ -1,7 +1,8 @@
 //! [`Ros2Base`]: a mobile base driven by its own ROS 2 driver — odometry
-//! from the driver's `nav_msgs/Odometry` topic, velocity commands to its
-//! `geometry_msgs/Twist` topic, health from the odometry's age — so any
-//! base with a ROS 2 driver works with clsmap, not only the line protocol.
+//! from the driver's `nav_msgs/Odometry` topic (or its `odom` → `base_link`
+//! transform on `/tf`), velocity commands to its `geometry_msgs/Twist`
+//! topic, health from the odometry's age — so any base with a ROS 2 driver
+//! works with clsmap, not only the line protocol.
 //!
 //! The DDS side (a participant and a node of its own, `<node_name>_base`)
 //! runs on a thread, like the ROS 2 node's publishers: the loop hands
@@ -18,7 +19,7 @@ use std::time::{Duration, Instant};
 
 use clsmap_base::{BaseAdapter, BaseError, BasePose, Health, OdometrySample, Twist};
 use ros2_client::{
-    Name, NodeName, NodeOptions, QosProfile,
+    Name, NodeName, NodeOptions, QosProfile, Subscription,
     qos::{History, WhenFull},
 };
 use tracing::warn;
@@ -26,7 +27,7 @@ use tracing::warn;
 use super::config::{BaseConfig, Ros2Section};
 use super::dds_sink::{CdrBody, namespace, ros2_context, type_name};
 use super::handoff::Handoff;
-use crate::ros2::{Odometry, RosMessage, Twist as RosTwist, Vector3};
+use crate::ros2::{Odometry, RosMessage, TfMessage, Twist as RosTwist, Vector3};
 
 /// A stamp further than this (s) from the arrival is not on this clock.
 pub const CLOCK_TOLERANCE: f64 = 0.5;
@@ -95,17 +96,21 @@ impl Ros2Base {
         let (samples_tx, samples) = sync_channel(SAMPLES);
         let (commands, commands_rx) = Handoff::new(COMMANDS, "the ROS 2 base");
         let (ready_tx, ready_rx) = sync_channel::<Result<(), String>>(1);
-        let (ros2, odom_topic, cmd_topic) = (
-            ros2.clone(),
-            base.odom_topic.clone(),
-            base.cmd_vel_topic.clone(),
-        );
+        let source = match base.odom_from_tf {
+            true => OdometrySource::Tf {
+                odom: ros2.odom_frame.clone(),
+                base: ros2.base_frame.clone(),
+            },
+            false => OdometrySource::Topic(base.odom_topic.clone()),
+        };
+        let described = source.describe();
+        let (ros2, cmd_topic) = (ros2.clone(), base.cmd_vel_topic.clone());
         let thread = std::thread::Builder::new()
             .name("clsmap-ros2-base".into())
             .spawn(move || {
                 run_node(
                     &ros2,
-                    &odom_topic,
+                    &source,
                     &cmd_topic,
                     t0,
                     &samples_tx,
@@ -128,7 +133,7 @@ impl Ros2Base {
             now: 0.0,
             last_arrival: None,
             stale_after: base.stale_odometry,
-            odom_topic: base.odom_topic.clone(),
+            odom_topic: described,
             clock_warned: false,
         })
     }
@@ -228,9 +233,78 @@ impl BaseAdapter for Ros2Base {
     }
 }
 
+/// Where the driver's odometry comes from.
+#[derive(Debug, Clone)]
+enum OdometrySource {
+    /// `nav_msgs/Odometry` on this topic.
+    Topic(String),
+    /// The transform of `base` in `odom` on `/tf`.
+    Tf { odom: String, base: String },
+}
+
+impl OdometrySource {
+    /// As the log names it.
+    fn describe(&self) -> String {
+        match self {
+            OdometrySource::Topic(t) => t.clone(),
+            OdometrySource::Tf { odom, base } => format!("/tf ({odom} → {base})"),
+        }
+    }
+}
+
+/// The subscription of an [`OdometrySource`].
+enum OdometryReader {
+    Topic(Subscription<Odometry>),
+    Tf {
+        reader: Subscription<TfMessage>,
+        odom: String,
+        base: String,
+    },
+}
+
+impl OdometryReader {
+    /// The next odometry pose and its stamp (s since the epoch), if one
+    /// came; `Err` when a message could not be read.
+    fn take(&self) -> Result<Option<(f64, BasePose)>, String> {
+        let pose = |p: &Vector3, q: &crate::ros2::Quaternion| BasePose {
+            x: p.x,
+            y: p.y,
+            theta: q.yaw(),
+        };
+        match self {
+            OdometryReader::Topic(r) => match r.take() {
+                Ok(Some((m, _))) => Ok(Some((
+                    m.header.stamp.as_secs(),
+                    pose(&m.pose.position, &m.pose.orientation),
+                ))),
+                Ok(None) => Ok(None),
+                Err(e) => Err(format!("{e:?}")),
+            },
+            OdometryReader::Tf { reader, odom, base } => loop {
+                match reader.take() {
+                    Ok(Some((m, _))) => {
+                        let frame = |f: &str| f.trim_start_matches('/').to_string();
+                        let found = m.transforms.iter().find(|t| {
+                            frame(&t.header.frame_id) == *odom && frame(&t.child_frame_id) == *base
+                        });
+                        if let Some(t) = found {
+                            return Ok(Some((
+                                t.header.stamp.as_secs(),
+                                pose(&t.translation, &t.rotation),
+                            )));
+                        }
+                    }
+                    Ok(None) => return Ok(None),
+                    Err(e) => return Err(format!("{e:?}")),
+                }
+            },
+        }
+    }
+}
+
 fn run_node(
     ros2: &Ros2Section,
-    odom_topic: &str,
+    source: &OdometrySource,
     cmd_topic: &str,
     t0: Instant,
     samples: &SyncSender<Arrival>,
@@ -251,12 +325,26 @@ fn run_node(
         // A best-effort reader matches reliable and best-effort drivers; a
         // reliable writer matches either kind of reader.
         let listen = QosProfile::subscription_default().history(History::KeepLast { depth: 50 });
-        let odom = node
-            .create_topic(&topic_name(odom_topic)?, type_name(Odometry::TYPE), &listen)
-            .map_err(|e| format!("topic {odom_topic}: {e:?}"))?;
-        let odom = node
-            .create_subscription::<Odometry>(&odom, Some(listen))
-            .map_err(|e| format!("subscription: {e:?}"))?;
+        let (name, ty) = match source {
+            OdometrySource::Topic(t) => (t.as_str(), Odometry::TYPE),
+            OdometrySource::Tf { .. } => ("/tf", TfMessage::TYPE),
+        };
+        let topic = node
+            .create_topic(&topic_name(name)?, type_name(ty), &listen)
+            .map_err(|e| format!("topic {name}: {e:?}"))?;
+        let odom = match source {
+            OdometrySource::Topic(_) => OdometryReader::Topic(
+                node.create_subscription::<Odometry>(&topic, Some(listen))
+                    .map_err(|e| format!("subscription: {e:?}"))?,
+            ),
+            OdometrySource::Tf { odom, base } => OdometryReader::Tf {
+                reader: node
+                    .create_subscription::<TfMessage>(&topic, Some(listen))
+                    .map_err(|e| format!("subscription: {e:?}"))?,
+                odom: odom.clone(),
+                base: base.clone(),
+            },
+        };
         let talk = QosProfile::publisher_default()
             .reliability_reliable(WhenFull::Wait(WRITE_WAIT))
             .history(History::KeepLast { depth: 10 });
@@ -308,15 +396,10 @@ fn run_node(
         }
         loop {
             match odom.take() {
-                Ok(Some((m, _))) => {
-                    let p = &m.pose;
+                Ok(Some((stamp, pose))) => {
                     let arrival = Arrival {
-                        stamp: m.header.stamp.as_secs(),
-                        pose: BasePose {
-                            x: p.position.x,
-                            y: p.position.y,
-                            theta: p.orientation.yaw(),
-                        },
+                        stamp,
+                        pose,
                         at: t0.elapsed().as_secs_f64(),
                     };
                     // A full queue drops (the loop polls at 50 Hz); a
@@ -328,10 +411,7 @@ fn run_node(
                 }
                 Ok(None) => break,
                 Err(e) => {
-                    warn!(
-                        topic = odom_topic,
-                        "an odometry message could not be read: {e:?}"
-                    );
+                    warn!("an odometry message could not be read: {e}");
                     break;
                 }
             }

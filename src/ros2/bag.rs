@@ -348,6 +348,8 @@ pub struct BagReader {
     failed: bool,
     /// Bytes of the files already read through.
     done_bytes: u64,
+    /// The topics every file's summary lists, when each has one.
+    summary: Option<Vec<TopicInfo>>,
 }
 
 impl std::fmt::Debug for BagReader {
@@ -361,13 +363,40 @@ impl std::fmt::Debug for BagReader {
 impl BagReader {
     /// Opens a `.mcap` file or a rosbag2 bag directory.
     pub fn open(path: &Path) -> Result<BagReader, BagError> {
-        let mut files = bag_files(path)?.into_iter();
+        let paths = bag_files(path)?;
+        let mut files = paths.clone().into_iter();
         let first = files.next().map(|p| FileReader::open(&p)).transpose()?;
+        // The later splits' summaries too: a topic may start in any.
+        let mut summary = first.as_ref().and_then(|f| f.summary.clone());
+        for p in paths.iter().skip(1) {
+            let Some(topics) = summary.as_mut() else {
+                break;
+            };
+            let read_error = |source| BagError::Read {
+                path: p.to_owned(),
+                source,
+            };
+            let mut file = File::open(p).map_err(read_error)?;
+            match read_summary(&mut file).map_err(read_error)? {
+                Some(more) => {
+                    for t in more {
+                        if !topics
+                            .iter()
+                            .any(|k| k.topic == t.topic && k.type_name == t.type_name)
+                        {
+                            topics.push(t);
+                        }
+                    }
+                }
+                None => summary = None,
+            }
+        }
         Ok(BagReader {
             files,
             current: first,
             failed: false,
             done_bytes: 0,
+            summary,
         })
     }
 
@@ -376,10 +405,11 @@ impl BagReader {
         self.done_bytes + self.current.as_ref().map_or(0, |c| c.offset)
     }
 
-    /// The topics the first file's summary lists, if it has one (a bag
-    /// cut short has none; its topics are then known as they come).
+    /// The topics the summaries of the bag's files list, if each file
+    /// has one (a file cut short has none; the topics are then known as
+    /// they come).
     pub fn summary_topics(&self) -> Option<&[TopicInfo]> {
-        self.current.as_ref().and_then(|c| c.summary.as_deref())
+        self.summary.as_deref()
     }
 }
 
@@ -621,7 +651,7 @@ fn read_summary(file: &mut File) -> std::io::Result<Option<Vec<TopicInfo>>> {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-    use crate::ros2::msg::{ByteArray, Header, LaserScan, Odometry, Time};
+    use crate::ros2::msg::{ByteArray, DiagnosticArray, Header, LaserScan, Odometry, Time};
 
     fn scan(i: u32) -> LaserScan {
         LaserScan {
@@ -777,5 +807,38 @@ mod tests {
             .map(|p| p.file_name().unwrap().to_str().unwrap().to_string())
             .collect();
         assert_eq!(names, ["b_0.mcap", "b_2.mcap", "b_10.mcap"]);
+    }
+
+    #[test]
+    fn a_split_bag_lists_the_topics_of_every_split() {
+        let dir = tempfile::tempdir().unwrap();
+        write_bag(&dir.path().join("b_0.mcap"), 10);
+        let mut later = BagWriter::create(&dir.path().join("b_1.mcap")).unwrap();
+        let mut d = later
+            .topic::<DiagnosticArray>("/diagnostics", Durability::Volatile)
+            .unwrap();
+        later
+            .write(&mut d, 20_000_000_000, &DiagnosticArray::default())
+            .unwrap();
+        later.finish().unwrap();
+        let reader = BagReader::open(dir.path()).unwrap();
+        let topics: Vec<&str> = reader
+            .summary_topics()
+            .unwrap()
+            .iter()
+            .map(|t| t.topic.as_str())
+            .collect();
+        assert_eq!(topics.len(), 4, "{topics:?}");
+        assert!(topics.contains(&"/diagnostics") && topics.contains(&"/scan"));
+        assert_eq!(reader.count(), 31);
+        // A split cut short has no summary: the topics are not known ahead.
+        let bytes = std::fs::read(dir.path().join("b_1.mcap")).unwrap();
+        std::fs::write(dir.path().join("b_1.mcap"), &bytes[..bytes.len() - 40]).unwrap();
+        assert!(
+            BagReader::open(dir.path())
+                .unwrap()
+                .summary_topics()
+                .is_none()
+        );
     }
 }

@@ -689,7 +689,7 @@ impl RosMessage for OccupancyGrid {
 
 /// `geometry_msgs/TransformStamped`: the pose of `child_frame_id` in
 /// `header.frame_id`.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
 pub struct TransformStamped {
     pub header: Header,
     pub child_frame_id: String,
@@ -698,7 +698,7 @@ pub struct TransformStamped {
 }
 
 /// `tf2_msgs/TFMessage`.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
 pub struct TfMessage {
     pub transforms: Vec<TransformStamped>,
 }

@@ -608,26 +608,20 @@ fn cmd_vel_from_an_independent_dds_publisher_drives_the_base() {
     assert!((0.3..0.8).contains(&moved), "moved {moved:.3} m: {report}");
 }
 
-/// A base behind its own ROS 2 driver (`[base] adapter = "ros2"`), the
-/// driver on an independent DDS stack (`scripts/ros2_base.py`: PyPI
-/// `cyclonedds`, integrating /cmd_vel into /odom at 50 Hz like a holonomic
-/// base's driver node): exploration drives it through /cmd_vel within the
-/// speed limit; when the driver's odometry stops, the base gets a stop
-/// within the stale-odometry guard (0.5 s) and nothing moving until the
-/// odometry is back; then it drives again. The scans come from `clsmap
-/// emulate` on a pseudo-terminal, DDS stays on the loopback interface.
-#[test]
-#[ignore = "needs PyPI cyclonedds; CI runs it: cargo test --test cli -- --ignored"]
-fn a_ros2_base_driver_is_driven_and_stopped_when_its_odometry_stops() {
-    let dir = TempDir::new("run-ros2-base");
+/// `clsmap run` with `[base] adapter = "ros2"` (and `base` added to
+/// `[base]`) beside `scripts/ros2_base.py` run with `args`, on the scans of
+/// `clsmap emulate`, DDS on the loopback interface; returns the script's
+/// report and the daemon's log.
+fn run_with_a_ros2_base(name: &str, base: &str, args: &[&str]) -> (serde_json::Value, String) {
+    let dir = TempDir::new(name);
     let link = dir.join("lms200");
     let emulator = super::emulator::EmulatorProcess::start(&dir, &link);
-    let domain = 100 + (std::process::id() + 25) % 100;
+    let domain = 100 + (std::process::id() + 25 + args.len() as u32) % 100;
     let config = dir.join("clsmap.toml");
     std::fs::write(
         &config,
         format!(
-            "[sensor]\nsource = \"serial\"\nport = {:?}\n\n[base]\nadapter = \"ros2\"\n\n\
+            "[sensor]\nsource = \"serial\"\nport = {:?}\n\n[base]\nadapter = \"ros2\"\n{base}\n\
              [exploration]\nenabled = true\n\n[daemon]\nstate_dir = {:?}\n\n\
              [ros2]\nlocalhost_only = true\ndomain_id = {domain}\n",
             link.display().to_string(),
@@ -642,7 +636,7 @@ fn a_ros2_base_driver_is_driven_and_stopped_when_its_odometry_stops() {
     let out = Command::new(&python)
         .arg(&script)
         .args(["--domain", &domain.to_string(), "--localhost"])
-        .args(["--seconds", "14", "--silent-at", "5", "--silent-for", "3"])
+        .args(args)
         .output()
         .unwrap();
     daemon.signal("TERM");
@@ -656,7 +650,24 @@ fn a_ros2_base_driver_is_driven_and_stopped_when_its_odometry_stops() {
         script.display(),
         String::from_utf8_lossy(&out.stderr)
     );
-    let report: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+    (serde_json::from_str(stdout.trim()).unwrap(), stderr)
+}
+
+/// A base behind its own ROS 2 driver (`[base] adapter = "ros2"`), the
+/// driver on an independent DDS stack (`scripts/ros2_base.py`: PyPI
+/// `cyclonedds`, integrating /cmd_vel into /odom at 50 Hz like a holonomic
+/// base's driver node): exploration drives it through /cmd_vel within the
+/// speed limit; when the driver's odometry stops, the base gets a stop
+/// within the stale-odometry guard (0.5 s) and nothing moving until the
+/// odometry is back; then it drives again.
+#[test]
+#[ignore = "needs PyPI cyclonedds; CI runs it: cargo test --test cli -- --ignored"]
+fn a_ros2_base_driver_is_driven_and_stopped_when_its_odometry_stops() {
+    let (report, stderr) = run_with_a_ros2_base(
+        "run-ros2-base",
+        "",
+        &["--seconds", "14", "--silent-at", "5", "--silent-for", "3"],
+    );
     let moving = report["moving"].as_u64().unwrap();
     let fastest = report["fastest"].as_f64().unwrap();
     assert!(moving > 50, "{report}\n{stderr}");
@@ -673,4 +684,22 @@ fn a_ros2_base_driver_is_driven_and_stopped_when_its_odometry_stops() {
         "{report}"
     );
     assert!(stderr.contains("no odometry on /odom"), "{stderr}");
+}
+
+/// The same driver publishing its odometry only as `odom` → `base_link`
+/// on /tf (`odom_from_tf`): the base is driven on it.
+#[test]
+#[ignore = "needs PyPI cyclonedds; CI runs it: cargo test --test cli -- --ignored"]
+fn a_ros2_base_driver_that_publishes_only_tf_is_driven() {
+    let (report, stderr) = run_with_a_ros2_base(
+        "run-ros2-base-tf",
+        "odom_from_tf = true\n",
+        &["--seconds", "6", "--tf"],
+    );
+    // Motion is commanded only on fresh odometry.
+    assert!(
+        report["moving"].as_u64().unwrap() > 20,
+        "{report}\n{stderr}"
+    );
+    assert!(report["driven"].as_f64().unwrap() > 0.1, "{report}");
 }
