@@ -6,6 +6,7 @@
 use std::io::Write;
 use std::ops::ControlFlow;
 use std::path::Path;
+use std::sync::Mutex;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use crate::link::{Event, Link, LinkConfig, LinkStats, Output};
@@ -66,11 +67,11 @@ impl SerialDriver {
     ) -> Result<SerialDriver, DriverError> {
         let mut writer = RecordingWriter::new(out)?;
         writer.write(&Record::Note {
-            t_us: unix_micros(),
+            t_us: recording_micros(),
             text: note.to_string(),
         })?;
         writer.write(&Record::Baud {
-            t_us: unix_micros(),
+            t_us: recording_micros(),
             baud: self.transport.baud(),
         })?;
         Ok(SerialDriver {
@@ -159,16 +160,66 @@ impl SerialDriver {
 
     fn record(&mut self, make: impl FnOnce(i64) -> Record) -> Result<(), DriverError> {
         if let Some(r) = self.recording.as_mut() {
-            r.write(&make(unix_micros()))?;
+            r.write(&make(recording_micros()))?;
         }
         Ok(())
     }
 }
 
-/// Host wall-clock time in µs since the Unix epoch, the recording's clock.
+/// Host wall-clock time in µs since the Unix epoch.
 pub fn unix_micros() -> i64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map(|d| i64::try_from(d.as_micros()).unwrap_or(i64::MAX))
         .unwrap_or(0)
+}
+
+/// The recordings' clock (µs since the Unix epoch): the wall clock, but
+/// never backwards. When the wall clock steps back (NTP correcting a
+/// clock that ran ahead) the recordings' clock goes on at the monotonic
+/// clock's pace until the wall clock catches up; a step forward (a robot
+/// without a battery clock setting its time) is followed. A recording
+/// whose times went back would lose every scan until they caught up.
+pub fn recording_micros() -> i64 {
+    static LAST: Mutex<Option<(i64, Instant)>> = Mutex::new(None);
+    let mut last = LAST.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let now = Instant::now();
+    let t = never_backwards(*last, unix_micros(), now);
+    *last = Some((t, now));
+    t
+}
+
+/// The wall time `wall_us`, or, when it is behind the `last` reading
+/// (its value, taken at an instant) plus the monotonic time since, that.
+fn never_backwards(last: Option<(i64, Instant)>, wall_us: i64, now: Instant) -> i64 {
+    match last {
+        Some((t, at)) => {
+            let since = i64::try_from(now.saturating_duration_since(at).as_micros()).unwrap_or(0);
+            wall_us.max(t.saturating_add(since))
+        }
+        None => wall_us,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_recording_clock_never_steps_back_and_follows_steps_forward() {
+        let start = Instant::now();
+        let at = |ms: u64| start + Duration::from_millis(ms);
+        let t0 = never_backwards(None, 1_000_000_000, at(0));
+        assert_eq!(t0, 1_000_000_000);
+        // 100 ms later the wall clock is stepped back an hour: the clock
+        // goes on 100 ms later instead.
+        let t1 = never_backwards(Some((t0, at(0))), 1_000_100_000 - 3_600_000_000, at(100));
+        assert_eq!(t1, 1_000_100_000);
+        let t2 = never_backwards(Some((t1, at(100))), 1_000_200_000 - 3_600_000_000, at(200));
+        assert_eq!(t2, 1_000_200_000);
+        // A step forward (a day) is taken.
+        let t3 = never_backwards(Some((t2, at(200))), 1_086_400_000_000, at(300));
+        assert_eq!(t3, 1_086_400_000_000);
+        assert!(recording_micros() <= recording_micros());
+    }
 }
