@@ -729,10 +729,16 @@ impl DaemonConfig {
                 ("base.odom_topic", &b.odom_topic),
                 ("base.cmd_vel_topic", &b.cmd_vel_topic),
             ] {
-                if !(topic.starts_with('/') && topic.len() > 1)
-                    || topic.ends_with('/')
-                    || !name_ok(topic, true)
-                {
+                // ROS 2 names: /token/token, each token letters, digits
+                // and _, not starting with a digit, no "__".
+                let tokens_ok = topic.strip_prefix('/').is_some_and(|rest| {
+                    rest.split('/').all(|t| {
+                        !t.is_empty()
+                            && !t.starts_with(|c: char| c.is_ascii_digit())
+                            && !t.contains("__")
+                    })
+                });
+                if !tokens_ok || !name_ok(topic, true) {
                     return Err(DaemonConfigError::Invalid {
                         key: key.into(),
                         line: locate(key),
@@ -937,6 +943,14 @@ mod tests {
             (
                 "[base]\nadapter = \"ros2\"\ncmd_vel_topic = \"/a b\"\n",
                 "base.cmd_vel_topic (line 3)",
+            ),
+            (
+                "[base]\nadapter = \"ros2\"\nodom_topic = \"/a//odom\"\n",
+                "base.odom_topic (line 3)",
+            ),
+            (
+                "[base]\nadapter = \"ros2\"\nodom_topic = \"/1odom\"\n",
+                "base.odom_topic (line 3)",
             ),
         ] {
             let e = DaemonConfig::from_toml(text).unwrap_err().to_string();

@@ -271,7 +271,7 @@ impl Core {
             let version = (mapper.keyframe_graph().keyframes().len() as u64) << 32
                 | (self.optimisations & 0xffff_ffff);
             if out.map_due(version, t) {
-                out.map(version, t, mapper.cls_map().clone(), mapper.loop_edges());
+                out.map(version, t, mapper.shared_cls_map(), mapper.loop_edges());
             }
         }
         if self.first_scan_after.is_none() {
@@ -490,7 +490,7 @@ impl Core {
             self.config.mapper.laser_mount,
             crate::input::lms200::lms200_reach(units),
             &self.config.ros2,
-            self.config.base.adapter == super::config::BaseKind::Ros2,
+            self.config.base.adapter != super::config::BaseKind::None,
         ));
     }
 

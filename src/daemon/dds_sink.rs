@@ -27,7 +27,7 @@ use tracing::{info, warn};
 
 use super::config::Ros2Section;
 use super::handoff::Handoff;
-use super::ros2_out::{ODOM_TOPIC, Ros2Message, Stamped, TOPICS};
+use super::ros2_out::{ODOM_TOPIC, Ros2Message, Stamped, TOPICS, for_dds};
 use crate::geometry::Pose2;
 use crate::ros2::{PoseWithCovarianceStamped, RosMessage, Twist};
 
@@ -61,7 +61,16 @@ pub enum DdsError {
 /// A message's CDR body, written as it is: a tuple of bytes has neither a
 /// length nor padding in CDR, and the body's alignment counts from its
 /// first byte in both encoders.
-pub(super) struct CdrBody(pub(super) Vec<u8>);
+pub(super) struct CdrBody(Vec<u8>);
+
+impl CdrBody {
+    /// `cdr` (a message as [`crate::ros2::msg`] writes it) without its
+    /// 4-byte encapsulation header, which the DDS stack writes itself.
+    pub(super) fn of(mut cdr: Vec<u8>) -> CdrBody {
+        cdr.drain(..4.min(cdr.len()));
+        CdrBody(cdr)
+    }
+}
 
 impl Serialize for CdrBody {
     fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
@@ -80,6 +89,8 @@ struct Publishers {
     cmd_vel: Option<Subscription<Twist>>,
     initial_pose: Subscription<PoseWithCovarianceStamped>,
     map_frame: String,
+    base_frame: String,
+    base_is_ros2: bool,
     /// Kept alive while publishing.
     _node: Node,
 }
@@ -182,6 +193,8 @@ fn start_node(cfg: &Ros2Section, base_is_ros2: bool) -> Result<Publishers, Strin
         cmd_vel,
         initial_pose,
         map_frame: cfg.map_frame.clone(),
+        base_frame: cfg.base_frame.clone(),
+        base_is_ros2,
         _node: node,
     })
 }
@@ -293,12 +306,14 @@ fn run_node(
 }
 
 fn publish(p: &Publishers, message: &Ros2Message) -> Result<(), ()> {
+    let Some(message) = for_dds(message, p.base_is_ros2, &p.base_frame) else {
+        return Ok(());
+    };
     // Rendered (a map's grid) and encoded here, off the loop.
-    let (Some(mut cdr), Some(Some(publisher))) =
+    let (Some(cdr), Some(Some(publisher))) =
         (message.encode(), p.topics.get(message.topic_index()))
     else {
         return Ok(());
     };
-    cdr.drain(..4);
-    publisher.publish(CdrBody(cdr)).map_err(|_| ())
+    publisher.publish(CdrBody::of(cdr)).map_err(|_| ())
 }

@@ -22,7 +22,7 @@ use ros2_client::{
     Name, NodeName, NodeOptions, QosProfile, Subscription,
     qos::{History, WhenFull},
 };
-use tracing::warn;
+use tracing::{info, warn};
 
 use super::config::{BaseConfig, Ros2Section};
 use super::dds_sink::{CdrBody, namespace, ros2_context, type_name};
@@ -40,6 +40,8 @@ const COMMANDS: usize = 64;
 const LISTEN_EVERY: Duration = Duration::from_millis(5);
 /// Longest a reliable command write waits for a slow reader.
 const WRITE_WAIT: Duration = Duration::from_millis(20);
+/// How long the node stays after its last command, for DDS to send it.
+const LINGER: Duration = Duration::from_millis(150);
 
 /// An odometry message as it arrived: its stamp (s since the epoch), the
 /// pose, and the arrival (daemon clock, s).
@@ -86,7 +88,10 @@ fn stamp_on_this_clock(stamp: f64, epoch: f64, at: f64) -> Option<f64> {
 impl Ros2Base {
     /// Joins DDS as `ros2` says and finds the driver's topics as `base`
     /// names them; `t0` is the daemon clock's zero and `epoch` the wall
-    /// clock then (s since the epoch). Returns once the node exists.
+    /// clock then (s since the epoch). Returns at once: the node is made
+    /// on its thread (the loop never waits for DDS), and a node that
+    /// cannot be made ends the thread, which [`BaseAdapter::link_lost`]
+    /// then reports.
     pub fn start(
         ros2: &Ros2Section,
         base: &BaseConfig,
@@ -95,7 +100,6 @@ impl Ros2Base {
     ) -> Result<Ros2Base, String> {
         let (samples_tx, samples) = sync_channel(SAMPLES);
         let (commands, commands_rx) = Handoff::new(COMMANDS, "the ROS 2 base");
-        let (ready_tx, ready_rx) = sync_channel::<Result<(), String>>(1);
         let source = match base.odom_from_tf {
             true => OdometrySource::Tf {
                 odom: ros2.odom_frame.clone(),
@@ -107,23 +111,8 @@ impl Ros2Base {
         let (ros2, cmd_topic) = (ros2.clone(), base.cmd_vel_topic.clone());
         let thread = std::thread::Builder::new()
             .name("clsmap-ros2-base".into())
-            .spawn(move || {
-                run_node(
-                    &ros2,
-                    &source,
-                    &cmd_topic,
-                    t0,
-                    &samples_tx,
-                    &commands_rx,
-                    &ready_tx,
-                )
-            })
+            .spawn(move || run_node(&ros2, &source, &cmd_topic, t0, &samples_tx, &commands_rx))
             .map_err(|e| e.to_string())?;
-        match ready_rx.recv() {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => return Err(e),
-            Err(_) => return Err("the ROS 2 base's thread ended".into()),
-        }
         Ok(Ros2Base {
             samples,
             commands,
@@ -180,7 +169,8 @@ impl Ros2Base {
 
 impl Drop for Ros2Base {
     fn drop(&mut self) {
-        // The thread sends what is queued (the final stop), then ends.
+        // A stop last; the thread sends what is queued, then ends.
+        self.commands.send(Twist::ZERO);
         self.commands.close();
         if let Some(t) = self.thread.take() {
             let _ = t.join();
@@ -309,7 +299,6 @@ fn run_node(
     t0: Instant,
     samples: &SyncSender<Arrival>,
     commands: &Receiver<Twist>,
-    ready: &SyncSender<Result<(), String>>,
 ) -> Result<(), String> {
     let started = (|| {
         let context = ros2_context(ros2)?;
@@ -356,17 +345,9 @@ fn run_node(
             .map_err(|e| format!("publisher: {e:?}"))?;
         Ok::<_, String>((node, odom, cmd))
     })();
-    let (_node, odom, cmd) = match started {
-        Ok(parts) => {
-            let _ = ready.send(Ok(()));
-            parts
-        }
-        Err(e) => {
-            let _ = ready.send(Err(e.clone()));
-            return Err(e);
-        }
-    };
-    let mut refused = 0u64;
+    let (_node, odom, cmd) = started?;
+    info!(topic = cmd_topic, "ROS 2 base: node up");
+    let (mut refused, mut unreadable) = (0u64, 0u64);
     loop {
         match commands.recv_timeout(LISTEN_EVERY) {
             Ok(t) => {
@@ -382,9 +363,7 @@ fn run_node(
                         z: t.omega,
                     },
                 };
-                let mut cdr = twist.to_cdr();
-                cdr.drain(..4);
-                if cmd.publish(CdrBody(cdr)).is_err() {
+                if cmd.publish(CdrBody::of(twist.to_cdr())).is_err() {
                     refused += 1;
                     if refused == 1 {
                         warn!(topic = cmd_topic, "a velocity command could not be sent");
@@ -392,7 +371,12 @@ fn run_node(
                 }
             }
             Err(RecvTimeoutError::Timeout) => {}
-            Err(RecvTimeoutError::Disconnected) => return Ok(()),
+            Err(RecvTimeoutError::Disconnected) => {
+                // The last command (the stop) is sent; DDS sends on its
+                // own threads, so give it a moment before the node goes.
+                std::thread::sleep(LINGER);
+                return Ok(());
+            }
         }
         loop {
             match odom.take() {
@@ -411,7 +395,13 @@ fn run_node(
                 }
                 Ok(None) => break,
                 Err(e) => {
-                    warn!("an odometry message could not be read: {e}");
+                    unreadable += 1;
+                    if unreadable.is_power_of_two() {
+                        warn!(
+                            count = unreadable,
+                            "odometry messages could not be read: {e}"
+                        );
+                    }
                     break;
                 }
             }

@@ -3,9 +3,10 @@
 //! REP 105 (`map` → `odom` from the localizer, `odom` → `base_link` from the
 //! base's odometry, `base_link` → `laser` from the mounting, once, static);
 //! and, at a bounded rate, the map as an occupancy grid (`/map`) and as
-//! lines (`/cls_map`). The frames are named by `[ros2]`; when the base is a
-//! ROS 2 node itself, its driver publishes `/odom` and `odom` → `base_link`,
-//! so they are left out here.
+//! lines (`/cls_map`). The frames are named by `[ros2]`. When the base is
+//! a ROS 2 node itself, its driver publishes `/odom` and `odom` →
+//! `base_link` on DDS, so [`for_dds`] leaves them out there (the bag keeps
+//! them).
 //!
 //! Sans-IO, like the core it belongs to: [`Ros2Outbox`] turns a scan and
 //! its pose into stamped messages; a shell writes them into a bag (or, later,
@@ -16,6 +17,7 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 
 use super::config::Ros2Section;
+use crate::map::cls::grid::grid_extent;
 use crate::map::cls::{ClsMap, GridConfig, occupancy_grid};
 
 use crate::geometry::{Pose2, RangeScan};
@@ -74,10 +76,10 @@ pub enum Ros2Message {
 }
 
 /// The CLS map at one time and the pose graph's loop edges then, shared
-/// by `/map` and `/cls_map` (cloning the map is the loop's one cost).
+/// by `/map` and `/cls_map` (the map is the mapper's, shared: no copy).
 #[derive(Debug)]
 pub struct MapSnapshot {
-    pub map: ClsMap,
+    pub map: Arc<ClsMap>,
     /// Lines between the keyframes each loop closure joins (map frame, m).
     pub loop_edges: Vec<[[f64; 2]; 2]>,
     pub stamp: Time,
@@ -161,7 +163,7 @@ impl Ros2Message {
             Ros2Message::Tf(m) | Ros2Message::TfStatic(m) => m.to_cdr(),
             Ros2Message::Diagnostics(m) => m.to_cdr(),
             Ros2Message::Map(m) => grid_message(m)?.to_cdr(),
-            Ros2Message::ClsMap(m) => marker_message(m).to_cdr(),
+            Ros2Message::ClsMap(m) => marker_message(m)?.to_cdr(),
         })
     }
 }
@@ -180,9 +182,9 @@ pub struct Ros2Outbox {
     epoch: f64,
     /// Frame names and the map's rate and resolution.
     settings: Ros2Section,
-    /// Whether the base is a ROS 2 node that publishes its own odometry
-    /// and `odom` → `base_link`.
-    base_publishes_odometry: bool,
+    /// Whether a base is configured (its odometry is then awaited before
+    /// any transform goes out).
+    has_base: bool,
     mount: Pose2,
     /// The sensor's reach (m), the scans' `range_max`.
     reach: f64,
@@ -232,19 +234,19 @@ fn covariance_6(cov: &[[f64; 3]; 3]) -> [f64; 36] {
 impl Ros2Outbox {
     /// `epoch`: the wall clock (s since the epoch) at the daemon's zero;
     /// `mount`: the laser in the base frame; `reach`: the sensor's range
-    /// limit (m); `settings`: the frames and the map's rate;
-    /// `base_publishes_odometry`: the base is a ROS 2 node.
+    /// limit (m); `settings`: the frames and the map's rate; `has_base`:
+    /// a base gives odometry (no base: `odom` is `base_link`).
     pub fn new(
         epoch: f64,
         mount: Pose2,
         reach: f64,
         settings: &Ros2Section,
-        base_publishes_odometry: bool,
+        has_base: bool,
     ) -> Self {
         Ros2Outbox {
             epoch,
             settings: settings.clone(),
-            base_publishes_odometry,
+            has_base,
             mount,
             reach,
             queue: VecDeque::new(),
@@ -280,7 +282,7 @@ impl Ros2Outbox {
 
     /// Queues `map` (at `version`) with the pose graph's `loop_edges`
     /// for `/map` and `/cls_map` at `t`.
-    pub fn map(&mut self, version: u64, t: f64, map: ClsMap, loop_edges: Vec<[[f64; 2]; 2]>) {
+    pub fn map(&mut self, version: u64, t: f64, map: Arc<ClsMap>, loop_edges: Vec<[[f64; 2]; 2]>) {
         self.map_sent = Some((version, t));
         let snapshot = Arc::new(MapSnapshot {
             map,
@@ -358,17 +360,17 @@ impl Ros2Outbox {
         // base, odom is base_link. A scan whose odometry is missing while
         // a base is there gets no transforms: odom must not jump (REP 105).
         self.had_odometry |= odometry.is_some();
-        if odometry.is_none() && (self.had_odometry || self.base_publishes_odometry) {
+        if odometry.is_none() && (self.had_odometry || self.has_base) {
             return;
         }
         let odom = odometry.unwrap_or(Pose2::IDENTITY);
         let map_to_odom = pose.compose(&odom.inverse());
-        let mut transforms = vec![transform(stamp, &map_frame, &odom_frame, &map_to_odom)];
-        if !self.base_publishes_odometry {
-            transforms.push(transform(stamp, &odom_frame, &base_frame, &odom));
-        }
+        let transforms = vec![
+            transform(stamp, &map_frame, &odom_frame, &map_to_odom),
+            transform(stamp, &odom_frame, &base_frame, &odom),
+        ];
         self.push(t, Ros2Message::Tf(TfMessage { transforms }));
-        if let Some(o) = odometry.filter(|_| !self.base_publishes_odometry) {
+        if let Some(o) = odometry {
             self.push(
                 t,
                 Ros2Message::Odometry(Box::new(Odometry {
@@ -412,15 +414,14 @@ pub fn grid_message(snapshot: &MapSnapshot) -> Option<OccupancyGrid> {
         resolution: snapshot.resolution,
         ..GridConfig::default()
     };
-    let grid = loop {
-        match occupancy_grid(&snapshot.map, &cfg) {
-            Ok(g) if g.width * g.height <= MAP_MAX_CELLS => break g,
-            Ok(_) | Err(crate::map::cls::GridError::TooLarge(_)) if cfg.resolution < 10.0 => {
-                cfg.resolution *= 2.0;
-            }
-            _ => return None,
-        }
-    };
+    // Coarsened before rendering: a grid is drawn once.
+    while cfg.resolution < 10.0 && {
+        let (_, cols, rows) = grid_extent(&snapshot.map, &cfg);
+        cols * rows > MAP_MAX_CELLS as f64
+    } {
+        cfg.resolution *= 2.0;
+    }
+    let grid = occupancy_grid(&snapshot.map, &cfg).ok()?;
     Some(OccupancyGrid {
         header: Header {
             stamp: snapshot.stamp,
@@ -448,11 +449,36 @@ pub fn grid_message(snapshot: &MapSnapshot) -> Option<OccupancyGrid> {
     })
 }
 
+/// `message` as it goes out on DDS beside a base's own ROS 2 driver
+/// (`base_is_ros2`), which publishes `/odom` and `odom` → `base_frame`
+/// itself: those are left out (`None`, or the other transforms only).
+pub fn for_dds(message: &Ros2Message, base_is_ros2: bool, base_frame: &str) -> Option<Ros2Message> {
+    if !base_is_ros2 {
+        return Some(message.clone());
+    }
+    match message {
+        Ros2Message::Odometry(_) => None,
+        Ros2Message::Tf(tf) => {
+            let transforms: Vec<TransformStamped> = tf
+                .transforms
+                .iter()
+                .filter(|t| t.child_frame_id != base_frame)
+                .cloned()
+                .collect();
+            (!transforms.is_empty()).then_some(Ros2Message::Tf(TfMessage { transforms }))
+        }
+        other => Some(other.clone()),
+    }
+}
+
 /// A map snapshot as lines for RViz and Foxglove: the walls (the CLS map's
 /// actual segments) solid, its frontiers (virtual segments) dashed, and the
 /// pose graph's loop edges; one marker each, replaced by the next message
-/// (an empty one is deleted).
-pub fn marker_message(snapshot: &MapSnapshot) -> MarkerArray {
+/// (an empty one is deleted). `None` for an empty map, as the grid.
+pub fn marker_message(snapshot: &MapSnapshot) -> Option<MarkerArray> {
+    if snapshot.map.is_empty() {
+        return None;
+    }
     let point = |p: [f64; 2]| Vector3 {
         x: p[0],
         y: p[1],
@@ -486,9 +512,11 @@ pub fn marker_message(snapshot: &MapSnapshot) -> MarkerArray {
         .flat_map(|&[a, b]| [point(a), point(b)])
         .collect();
     let rgba = |r, g, b| ColorRgba { r, g, b, a: 1.0 };
+    // Stamped zero ("the latest transform"): a viewer joining late, with
+    // another fixed frame, still places the latched markers.
     let marker = |id: i32, ns: &str, points: Vec<Vector3>, width: f64, color| Marker {
         header: Header {
-            stamp: snapshot.stamp,
+            stamp: Time::default(),
             frame_id: snapshot.frame.clone(),
         },
         ns: ns.into(),
@@ -509,13 +537,13 @@ pub fn marker_message(snapshot: &MapSnapshot) -> MarkerArray {
         points,
         ..Marker::default()
     };
-    MarkerArray {
+    Some(MarkerArray {
         markers: vec![
             marker(0, "walls", walls, 0.05, rgba(0.1, 0.1, 0.1)),
             marker(1, "frontiers", frontiers, 0.03, rgba(1.0, 0.55, 0.0)),
             marker(2, "loop_edges", loops, 0.02, rgba(0.1, 0.7, 0.2)),
         ],
-    }
+    })
 }
 
 #[cfg(test)]
@@ -618,32 +646,33 @@ mod tests {
         );
         let all = out.take();
         let topics: Vec<String> = all.iter().map(|m| m.message.topic()).collect();
-        // No /odom ever; no /tf without the base's odometry (map → odom
-        // would be a guess).
+        // No /tf before the base's first odometry (map → odom would be a
+        // guess that jumps when it comes).
         assert_eq!(
             topics,
-            ["/tf_static", "/scan", "/pose", "/scan", "/pose", "/tf"]
+            [
+                "/tf_static",
+                "/scan",
+                "/pose",
+                "/scan",
+                "/pose",
+                "/tf",
+                "/odom"
+            ]
         );
-        let Ros2Message::TfStatic(tf) = &all[0].message else {
-            panic!()
+        let frames = |m: &Ros2Message| match m {
+            Ros2Message::Tf(tf) | Ros2Message::TfStatic(tf) => tf
+                .transforms
+                .iter()
+                .map(|t| (t.header.frame_id.clone(), t.child_frame_id.clone()))
+                .collect::<Vec<_>>(),
+            _ => panic!("{m:?}"),
         };
+        let pair = |a: &str, b: &str| (a.to_string(), b.to_string());
+        assert_eq!(frames(&all[0].message), [pair("r1/base", "r1/lms")]);
         assert_eq!(
-            (
-                tf.transforms[0].header.frame_id.as_str(),
-                tf.transforms[0].child_frame_id.as_str()
-            ),
-            ("r1/base", "r1/lms")
-        );
-        let Ros2Message::Tf(tf) = &all[5].message else {
-            panic!()
-        };
-        assert_eq!(tf.transforms.len(), 1, "odom → base is the driver's");
-        assert_eq!(
-            (
-                tf.transforms[0].header.frame_id.as_str(),
-                tf.transforms[0].child_frame_id.as_str()
-            ),
-            ("world", "r1/odom")
+            frames(&all[5].message),
+            [pair("world", "r1/odom"), pair("r1/odom", "r1/base")]
         );
         let Ros2Message::Pose(p) = &all[2].message else {
             panic!()
@@ -653,6 +682,19 @@ mod tests {
             panic!()
         };
         assert_eq!(s.header.frame_id, "r1/lms");
+        // On DDS beside a ROS 2 base's driver, /odom and odom → base are
+        // the driver's; the bag keeps them.
+        let dds: Vec<Ros2Message> = all
+            .iter()
+            .filter_map(|m| for_dds(&m.message, true, "r1/base"))
+            .collect();
+        assert_eq!(dds.len(), 6);
+        assert_eq!(frames(&dds[5]), [pair("world", "r1/odom")]);
+        assert!(
+            all.iter()
+                .all(|m| for_dds(&m.message, false, "r1/base").as_ref() == Some(&m.message))
+        );
+        assert_eq!(TOPICS[ODOM_TOPIC].name, "odom");
     }
 
     #[test]
@@ -680,7 +722,7 @@ mod tests {
         };
         let mut out = Ros2Outbox::new(0.0, Pose2::IDENTITY, 8.183, &settings, false);
         assert!(out.map_due(1, 0.0));
-        out.map(1, 0.0, map, vec![]);
+        out.map(1, 0.0, Arc::new(map), vec![]);
         assert!(!out.map_due(2, 1.9) && !out.map_due(1, 5.0) && out.map_due(2, 2.0));
         let all = out.take();
         let Ros2Message::Map(grid) = &all[0].message else {
@@ -691,7 +733,7 @@ mod tests {
         let Ros2Message::ClsMap(lines) = &all[1].message else {
             panic!()
         };
-        let markers = marker_message(lines).markers;
+        let markers = marker_message(lines).unwrap().markers;
         assert_eq!(all[1].message.topic(), "/cls_map");
         // Three walls solid (one line each); the 1 m frontier in dashes of
         // 0.2 m every 0.3 m: 4 dashes; no loop edges: deleted.

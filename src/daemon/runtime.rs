@@ -248,11 +248,15 @@ impl Rig {
     }
 }
 
-fn build_rig(config: &DaemonConfig, t0: Instant) -> Result<Rig, DaemonError> {
+/// The rig of `config`; `t0` is the daemon clock's zero and `epoch` the
+/// wall clock then (s since the Unix epoch).
+fn build_rig(config: &DaemonConfig, t0: Instant, epoch: f64) -> Result<Rig, DaemonError> {
     #[cfg(feature = "sim")]
     let (mut robot, mut pty) = (None, None);
     #[cfg(not(feature = "sim"))]
     let _ = t0;
+    #[cfg(not(feature = "dds"))]
+    let _ = epoch;
     #[allow(unused_mut)]
     let mut sensor_port = config.sensor.port.clone();
     let base: Option<BaseConnector> = match config.base.adapter {
@@ -296,7 +300,6 @@ fn build_rig(config: &DaemonConfig, t0: Instant) -> Result<Rig, DaemonError> {
         #[cfg(feature = "dds")]
         BaseKind::Ros2 => {
             let (ros2, base) = (config.ros2.clone(), config.base.clone());
-            let epoch = lms200::driver::unix_micros() as f64 / 1e6 - t0.elapsed().as_secs_f64();
             Some(Box::new(move || {
                 super::ros2_base::Ros2Base::start(&ros2, &base, t0, epoch)
                     .map(|b| Box::new(b) as Box<dyn BaseAdapter + Send>)
@@ -379,6 +382,8 @@ fn on_ros2(core: &mut Core, command: Ros2Command, now: f64) {
 /// optimisations on blocking threads.
 pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, DaemonError> {
     let t0 = Instant::now();
+    // The wall clock at the daemon clock's zero: ROS 2 stamps are wall times.
+    let epoch = lms200::driver::unix_micros() as f64 / 1e6;
     let clock = move || t0.elapsed().as_secs_f64();
     let mut dirs = RunDirs::new(config.state_dir(), hooks.out_dir.clone())?;
     // The map first: a saved map that cannot be used stops the start
@@ -412,7 +417,7 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
         }
         None => (None, None),
     };
-    let mut rig = build_rig(&config, t0)?;
+    let mut rig = build_rig(&config, t0, epoch)?;
     let (scan_tx, mut scan_rx) = watch::channel::<Option<ScanSlot>>(None);
     let (report_tx, mut report_rx) = mpsc::unbounded_channel();
     // The run's bag holds the serial stream too.
@@ -462,8 +467,7 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     let publish = write_bag || config.ros2.enabled;
     let mut core = Core::new(config, live, base);
     if publish {
-        let wall_now = lms200::driver::unix_micros() as f64 / 1e6;
-        core.enable_ros2(wall_now - t0.elapsed().as_secs_f64());
+        core.enable_ros2(epoch);
     }
     // Started at the first scan, in the run's directory (a run that never
     // saw a scan leaves none behind); a bag that cannot be written is given
@@ -621,16 +625,17 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     if let Some(node) = dds.take() {
         let _ = tokio::task::spawn_blocking(move || node.finish()).await;
     }
+    // The sensor first: the bag then holds the serial stream to its end.
+    let joined = tokio::task::spawn_blocking(move || sensor.stop()).await;
+    if joined.is_err() {
+        warn!("the sensor thread did not stop cleanly");
+    }
     if let Some(sink) = bag.take() {
         match tokio::task::spawn_blocking(move || sink.finish()).await {
             Ok(Ok((path, n))) => info!(path = %path.display(), messages = n, "bag written"),
             Ok(Err(e)) => error!("the bag is incomplete: {}", crate::error_chain(&e)),
             Err(_) => error!("the bag writer did not finish"),
         }
-    }
-    let joined = tokio::task::spawn_blocking(move || sensor.stop()).await;
-    if joined.is_err() {
-        warn!("the sensor thread did not stop cleanly");
     }
     while let Ok(report) = report_rx.try_recv() {
         on_report(&mut core, &report);

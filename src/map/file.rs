@@ -188,13 +188,13 @@ struct Probe {
 }
 
 /// What a map is made of: the CLS map, the walls, and the keyframes with
-/// their poses and the pose graph's edges. Keyframes are shared, not
-/// copied, so a snapshot of a running map is cheap. The walls and the CLS
+/// their poses and the pose graph's edges. The CLS map and the keyframes
+/// are shared, not copied, so a snapshot of a running map is cheap. The walls and the CLS
 /// map are derived data: a rebuild from the keyframes at their poses gives
 /// them again.
 #[derive(Debug, Clone, Default)]
 pub struct MapContents {
-    pub cls: ClsMap,
+    pub cls: Arc<ClsMap>,
     pub walls: Vec<MapSegment>,
     pub keyframes: Vec<Arc<Keyframe>>,
     pub poses: Vec<Pose2>,
@@ -356,8 +356,10 @@ pub fn decode(text: &str) -> Result<LoadedMap, StoreError> {
         let shapes = store::decode(text)?;
         return Ok(LoadedMap {
             contents: MapContents {
-                cls: ClsMap::from_shapes(ClsMapConfig::default(), shapes)
-                    .map_err(StoreError::Invariant)?,
+                cls: Arc::new(
+                    ClsMap::from_shapes(ClsMapConfig::default(), shapes)
+                        .map_err(StoreError::Invariant)?,
+                ),
                 ..MapContents::default()
             },
             version: store::VERSION,
@@ -507,7 +509,7 @@ fn checked_contents(cls: ClsMap, payload: Payload) -> Result<MapContents, StoreE
         });
     }
     Ok(MapContents {
-        cls,
+        cls: Arc::new(cls),
         walls: payload.walls,
         keyframes,
         poses,
@@ -564,7 +566,7 @@ mod tests {
             travelled: t * 0.5,
         };
         MapContents {
-            cls: square(),
+            cls: Arc::new(square()),
             walls: vec![MapSegment {
                 id: crate::geometry::SegmentId(3),
                 observations: 2,

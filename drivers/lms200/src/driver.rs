@@ -182,7 +182,9 @@ pub fn unix_micros() -> i64 {
 /// whose times went back would lose every scan until they caught up.
 pub fn recording_micros() -> i64 {
     static LAST: Mutex<Option<(i64, Instant)>> = Mutex::new(None);
-    let mut last = LAST.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let mut last = LAST
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     let now = Instant::now();
     let t = never_backwards(*last, unix_micros(), now);
     *last = Some((t, now));

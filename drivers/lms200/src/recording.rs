@@ -160,9 +160,13 @@ impl<W: Write> RecordingWriter<W> {
         let mut digest = RECORD_CRC.digest();
         digest.update(&head);
         digest.update(&payload);
-        self.out.write_all(&head)?;
-        self.out.write_all(&payload)?;
-        self.out.write_all(&digest.finalize().to_le_bytes())?;
+        // One write per record: a writer that keeps or drops whole writes
+        // (a bounded buffer) then keeps or drops whole records.
+        let mut bytes = Vec::with_capacity(HEADER_LEN + payload.len() + 4);
+        bytes.extend_from_slice(&head);
+        bytes.extend_from_slice(&payload);
+        bytes.extend_from_slice(&digest.finalize().to_le_bytes());
+        self.out.write_all(&bytes)?;
         Ok(())
     }
 

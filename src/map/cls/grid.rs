@@ -114,11 +114,10 @@ impl OccupancyGrid {
 }
 
 /// Rasterises `map` (see the module documentation).
-pub fn occupancy_grid(map: &ClsMap, cfg: &GridConfig) -> Result<OccupancyGrid, GridError> {
+/// The grid's lower-left corner (m) and its columns and rows (as `f64`:
+/// a huge count is not cut short) for `map` at `cfg`, without rendering.
+pub fn grid_extent(map: &ClsMap, cfg: &GridConfig) -> ([f64; 2], f64, f64) {
     let res = cfg.resolution;
-    if !(res.is_finite() && res > 0.0) {
-        return Err(GridError::Resolution(res));
-    }
     let margin = if cfg.margin.is_finite() {
         cfg.margin.max(0.0)
     } else {
@@ -139,6 +138,15 @@ pub fn occupancy_grid(map: &ClsMap, cfg: &GridConfig) -> Result<OccupancyGrid, G
     let origin = [lo[0] - margin, lo[1] - margin];
     let cols = ((hi[0] + margin - origin[0]) / res).ceil().max(1.0);
     let rows = ((hi[1] + margin - origin[1]) / res).ceil().max(1.0);
+    (origin, cols, rows)
+}
+
+pub fn occupancy_grid(map: &ClsMap, cfg: &GridConfig) -> Result<OccupancyGrid, GridError> {
+    let res = cfg.resolution;
+    if !(res.is_finite() && res > 0.0) {
+        return Err(GridError::Resolution(res));
+    }
+    let (origin, cols, rows) = grid_extent(map, cfg);
     // Checked in f64 first: a cast of a huge count to usize saturates.
     if cols * rows > MAX_CELLS as f64 {
         return Err(GridError::TooLarge(cols * rows));
