@@ -271,7 +271,10 @@ impl Core {
             let version = (mapper.keyframe_graph().keyframes().len() as u64) << 32
                 | (self.optimisations & 0xffff_ffff);
             if out.map_due(version, t) {
-                out.map(version, t, mapper.shared_cls_map(), mapper.loop_edges());
+                // The map copied here (at most every map_interval), rendered by the
+                // shells off the loop.
+                let map = std::sync::Arc::new(mapper.cls_map().clone());
+                out.map(version, t, map, mapper.loop_edges());
             }
         }
         if self.first_scan_after.is_none() {

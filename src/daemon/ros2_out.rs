@@ -76,7 +76,7 @@ pub enum Ros2Message {
 }
 
 /// The CLS map at one time and the pose graph's loop edges then, shared
-/// by `/map` and `/cls_map` (the map is the mapper's, shared: no copy).
+/// by `/map` and `/cls_map` (copying the map is the loop's one cost).
 #[derive(Debug)]
 pub struct MapSnapshot {
     pub map: Arc<ClsMap>,

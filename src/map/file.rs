@@ -188,13 +188,13 @@ struct Probe {
 }
 
 /// What a map is made of: the CLS map, the walls, and the keyframes with
-/// their poses and the pose graph's edges. The CLS map and the keyframes
-/// are shared, not copied, so a snapshot of a running map is cheap. The walls and the CLS
+/// their poses and the pose graph's edges. Keyframes are shared, not
+/// copied, so a snapshot of a running map is cheap. The walls and the CLS
 /// map are derived data: a rebuild from the keyframes at their poses gives
 /// them again.
 #[derive(Debug, Clone, Default)]
 pub struct MapContents {
-    pub cls: Arc<ClsMap>,
+    pub cls: ClsMap,
     pub walls: Vec<MapSegment>,
     pub keyframes: Vec<Arc<Keyframe>>,
     pub poses: Vec<Pose2>,
@@ -356,10 +356,8 @@ pub fn decode(text: &str) -> Result<LoadedMap, StoreError> {
         let shapes = store::decode(text)?;
         return Ok(LoadedMap {
             contents: MapContents {
-                cls: Arc::new(
-                    ClsMap::from_shapes(ClsMapConfig::default(), shapes)
-                        .map_err(StoreError::Invariant)?,
-                ),
+                cls: ClsMap::from_shapes(ClsMapConfig::default(), shapes)
+                    .map_err(StoreError::Invariant)?,
                 ..MapContents::default()
             },
             version: store::VERSION,
@@ -509,7 +507,7 @@ fn checked_contents(cls: ClsMap, payload: Payload) -> Result<MapContents, StoreE
         });
     }
     Ok(MapContents {
-        cls: Arc::new(cls),
+        cls,
         walls: payload.walls,
         keyframes,
         poses,
@@ -566,7 +564,7 @@ mod tests {
             travelled: t * 0.5,
         };
         MapContents {
-            cls: Arc::new(square()),
+            cls: square(),
             walls: vec![MapSegment {
                 id: crate::geometry::SegmentId(3),
                 observations: 2,

@@ -2,7 +2,6 @@
 //! keyframes grow the maps and the keyframe graph. The offline run and
 //! the live daemon both feed it.
 
-use std::sync::Arc;
 use std::time::Instant;
 
 use nalgebra::{Matrix3, Vector3};
@@ -48,10 +47,7 @@ pub struct Mapper {
     extractor: LineExtractor,
     lines: Vec<CogLine>,
     map: SegmentMap,
-    /// Shared with snapshots (the live view, `/map`, checkpoints), so a
-    /// snapshot costs no copy; the next keyframe copies it only if one is
-    /// still held then.
-    cls: Arc<ClsMap>,
+    cls: ClsMap,
     keyframes: KeyframePolicy,
     odometry: OdometryFeed,
     predictor: MotionPredictor,
@@ -109,7 +105,7 @@ impl Mapper {
             extractor: LineExtractor::new(),
             lines: Vec::new(),
             map: SegmentMap::new(config.map),
-            cls: Arc::new(ClsMap::new(config.cls_map())),
+            cls: ClsMap::new(config.cls_map()),
             keyframes: KeyframePolicy::new(config.keyframes),
             odometry: OdometryFeed::new(config.odometry_time_offset),
             predictor: MotionPredictor::default(),
@@ -172,7 +168,7 @@ impl Mapper {
             KeyframeGraph::from_parts(contents.keyframes, contents.poses, contents.edges)
                 .map_err(|e| PipelineError::StartMap(e.to_string()))?;
         mapper.first_session_keyframe = mode == MapMode::Extend;
-        mapper.cls = Arc::new(Arc::unwrap_or_clone(contents.cls).with_config(config.cls_map()));
+        mapper.cls = contents.cls.with_config(config.cls_map());
         mapper.start = Some(StartSearch::new(walls, GlobalConfig::default()));
         mapper.mode = Some(mode);
         Ok(mapper)
@@ -196,11 +192,6 @@ impl Mapper {
     /// date until [`settle`](Self::settle)).
     pub fn cls_map(&self) -> &ClsMap {
         &self.cls
-    }
-
-    /// The CLS map, shared (no copy).
-    pub fn shared_cls_map(&self) -> Arc<ClsMap> {
-        Arc::clone(&self.cls)
     }
 
     /// The keyframes and their pose graph.
@@ -264,7 +255,7 @@ impl Mapper {
     pub fn refresh_cls_map(&mut self) {
         if self.cls_stale {
             let (cls, refused) = self.graph.rebuild_cls(self.config.cls_map());
-            self.cls = Arc::new(cls);
+            self.cls = cls;
             self.summary.cls_rejected = refused;
             self.cls_stale = false;
         }
@@ -275,7 +266,7 @@ impl Mapper {
     /// and the pose graph's edges.
     pub fn contents(&self) -> MapContents {
         MapContents {
-            cls: Arc::clone(&self.cls),
+            cls: self.cls.clone(),
             walls: self.map.segments().collect(),
             keyframes: self.graph.keyframes().to_vec(),
             poses: self.graph.poses().to_vec(),
@@ -548,7 +539,7 @@ impl Mapper {
         if self.defer_cls_rebuild {
             self.cls_stale = true;
         } else {
-            self.cls = Arc::new(cls);
+            self.cls = cls;
             self.cls_stale = false;
         }
         Some(correction)
@@ -767,15 +758,7 @@ impl Mapper {
             // takes this keyframe too.
             if !self.cls_stale {
                 let grown = trace_span!("cls_update").in_scope(|| match &region {
-                    Ok(local) => {
-                        // A snapshot still shared elsewhere is copied once here.
-                        Arc::make_mut(&mut self.cls).add_keyframe(
-                            &self.lines,
-                            local,
-                            outcome.pose,
-                            cov,
-                        )
-                    }
+                    Ok(local) => self.cls.add_keyframe(&self.lines, local, outcome.pose, cov),
                     Err(e) => Err(ClsError::Local(e.clone())),
                 });
                 if let Err(e) = grown {

@@ -228,7 +228,7 @@ impl ClsMap {
     /// `map.json` (see [`crate::map::file`]), atomically.
     pub fn save(&self, path: &Path) -> Result<(), StoreError> {
         let contents = crate::map::MapContents {
-            cls: std::sync::Arc::new(self.clone()),
+            cls: self.clone(),
             ..Default::default()
         };
         crate::map::file::save(path, &contents)
@@ -243,8 +243,10 @@ impl ClsMap {
     /// Reads the CLS map of a `map.json` of either version; a corrupt,
     /// truncated or invalid file is refused with the reason.
     pub fn load(path: &Path, config: ClsMapConfig) -> Result<Self, StoreError> {
-        let cls = crate::map::file::load(path)?.contents.cls;
-        Ok(std::sync::Arc::unwrap_or_clone(cls).with_config(config))
+        Ok(crate::map::file::load(path)?
+            .contents
+            .cls
+            .with_config(config))
     }
 
     /// Adds one scan: `lines` extracted from `scan` (robot frame, scan
