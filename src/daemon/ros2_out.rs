@@ -13,6 +13,7 @@
 //! onto DDS). Times are the daemon's clock (s since its start) plus the wall
 //! clock at that start, so stamps are ROS times (ns since the epoch).
 
+use std::borrow::Cow;
 use std::collections::VecDeque;
 use std::sync::Arc;
 
@@ -452,22 +453,25 @@ pub fn grid_message(snapshot: &MapSnapshot) -> Option<OccupancyGrid> {
 /// `message` as it goes out on DDS beside a base's own ROS 2 driver
 /// (`base_is_ros2`), which publishes `/odom` and `odom` → `base_frame`
 /// itself: those are left out (`None`, or the other transforms only).
-pub fn for_dds(message: &Ros2Message, base_is_ros2: bool, base_frame: &str) -> Option<Ros2Message> {
-    if !base_is_ros2 {
-        return Some(message.clone());
-    }
+/// Anything else is passed through as it is, uncopied.
+pub fn for_dds<'a>(
+    message: &'a Ros2Message,
+    base_is_ros2: bool,
+    base_frame: &str,
+) -> Option<Cow<'a, Ros2Message>> {
     match message {
-        Ros2Message::Odometry(_) => None,
-        Ros2Message::Tf(tf) => {
+        Ros2Message::Odometry(_) if base_is_ros2 => None,
+        Ros2Message::Tf(tf) if base_is_ros2 => {
             let transforms: Vec<TransformStamped> = tf
                 .transforms
                 .iter()
                 .filter(|t| t.child_frame_id != base_frame)
                 .cloned()
                 .collect();
-            (!transforms.is_empty()).then_some(Ros2Message::Tf(TfMessage { transforms }))
+            (!transforms.is_empty())
+                .then_some(Cow::Owned(Ros2Message::Tf(TfMessage { transforms })))
         }
-        other => Some(other.clone()),
+        other => Some(Cow::Borrowed(other)),
     }
 }
 
@@ -686,13 +690,13 @@ mod tests {
         // the driver's; the bag keeps them.
         let dds: Vec<Ros2Message> = all
             .iter()
-            .filter_map(|m| for_dds(&m.message, true, "r1/base"))
+            .filter_map(|m| for_dds(&m.message, true, "r1/base").map(Cow::into_owned))
             .collect();
         assert_eq!(dds.len(), 6);
         assert_eq!(frames(&dds[5]), [pair("world", "r1/odom")]);
         assert!(
             all.iter()
-                .all(|m| for_dds(&m.message, false, "r1/base").as_ref() == Some(&m.message))
+                .all(|m| for_dds(&m.message, false, "r1/base").as_deref() == Some(&m.message))
         );
         assert_eq!(TOPICS[ODOM_TOPIC].name, "odom");
     }
