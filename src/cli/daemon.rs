@@ -26,12 +26,14 @@ pub fn run_daemon(
     config_path: &Path,
     map: Option<std::path::PathBuf>,
     mode: Option<String>,
+    ignore_checksum: bool,
 ) -> anyhow::Result<ExitCode> {
     let mut config = DaemonConfig::load(config_path)
         .with_context(|| format!("invalid configuration {}", config_path.display()))?;
     if let Some(map) = map {
         config.map.load = Some(map);
     }
+    config.map.ignore_checksum |= ignore_checksum;
     if let Some(mode) = mode {
         mode.parse::<clsmap::pipeline::MapMode>()
             .map_err(|e| anyhow::anyhow!("--mode: {e}"))?;

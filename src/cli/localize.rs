@@ -42,13 +42,14 @@ fn json_line(t: f64, result: &Result<GlobalResult, GlobalError>) -> serde_json::
 /// odometry is ignored.
 pub fn localize(
     map: &Path,
+    checksum: clsmap::map::file::ChecksumCheck,
     input: &Path,
     config: Option<&Path>,
     track: bool,
     max_hypotheses: usize,
 ) -> anyhow::Result<ExitCode> {
     let mapper = super::mapping::mapper_config(config)?;
-    let loaded = clsmap::map::file::load(map)
+    let loaded = clsmap::map::file::load_with(map, checksum)
         .with_context(|| format!("cannot load the map {}", map.display()))?;
     // The walls local localization matched against when the map was made
     // (version 2); a version-1 file has only the CLS map's actual segments.

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use anyhow::Context as _;
 use clsmap::eval::RelationErrors;
 use clsmap::files::trajectory::read_tum;
-use clsmap::map::cls::{self, ClsMap, ClsMapConfig, GridConfig};
+use clsmap::map::cls::{self, GridConfig};
 use clsmap::pipeline::config::MapperConfig;
 use clsmap::pipeline::{self, Progress};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -164,7 +164,12 @@ fn print_errors(e: &RelationErrors) {
     );
 }
 
-pub fn render(map: &Path, output: &Path, resolution: f64) -> anyhow::Result<ExitCode> {
+pub fn render(
+    map: &Path,
+    checksum: clsmap::map::file::ChecksumCheck,
+    output: &Path,
+    resolution: f64,
+) -> anyhow::Result<ExitCode> {
     let same_file = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
         (Ok(a), Ok(b)) => a == b,
         _ => false,
@@ -176,7 +181,8 @@ pub fn render(map: &Path, output: &Path, resolution: f64) -> anyhow::Result<Exit
             output.display()
         );
     }
-    let loaded = ClsMap::load(map, ClsMapConfig::default())
+    let loaded = clsmap::map::file::load_with(map, checksum)
+        .map(|m| m.contents.cls)
         .with_context(|| format!("cannot load the map {}", map.display()))?;
     let is_pgm = output
         .extension()

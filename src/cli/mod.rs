@@ -78,6 +78,10 @@ enum Command {
         /// With --map: `localize` or `extend`, as `[map] mode`.
         #[arg(long, requires = "map")]
         mode: Option<String>,
+        /// As `[map] ignore_checksum = true`: load the map even if its
+        /// checksum does not match (edited by hand), with a warning.
+        #[arg(long)]
+        ignore_checksum: bool,
     },
     /// Find an LMS200 on a serial port: line speed, type, firmware, variant, units.
     Probe {
@@ -188,6 +192,10 @@ enum Command {
         /// (new keyframes join it, loops close against it).
         #[arg(long, default_value = "localize", requires = "map")]
         mode: String,
+        /// Read --map even if its checksum does not match (a map edited by
+        /// hand), with a warning; every other check still applies.
+        #[arg(long, requires = "map")]
+        ignore_checksum: bool,
         #[command(flatten)]
         bag: BagArgs,
     },
@@ -202,6 +210,10 @@ enum Command {
         /// Cell size of the occupancy grid (m).
         #[arg(long, default_value_t = 0.05)]
         resolution: f64,
+        /// Read the map even if its checksum does not match (a map edited
+        /// by hand), with a warning; every other check still applies.
+        #[arg(long)]
+        ignore_checksum: bool,
     },
     /// Show a saved map (map.json) in the browser, through the live view
     /// the daemon serves, until Ctrl-C.
@@ -212,6 +224,10 @@ enum Command {
         /// shows the map to whoever reaches it).
         #[arg(long, default_value = "127.0.0.1:8080")]
         bind: String,
+        /// Read the map even if its checksum does not match (a map edited
+        /// by hand), with a warning; every other check still applies.
+        #[arg(long)]
+        ignore_checksum: bool,
     },
     /// Global localization: for each scan of a log, where in the map the
     /// robot may be, as one JSON line of ranked hypotheses (map frame).
@@ -230,6 +246,10 @@ enum Command {
         /// Most hypotheses printed per scan.
         #[arg(long, default_value_t = 5)]
         max_hypotheses: usize,
+        /// Read the map even if its checksum does not match (a map edited
+        /// by hand), with a warning; every other check still applies.
+        #[arg(long)]
+        ignore_checksum: bool,
         /// Mapper configuration (TOML) for the laser mounting and line
         /// extraction; see config/mapper.toml.
         #[arg(long)]
@@ -371,7 +391,12 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             no_web,
             ros2,
         } => demo::demo(out.as_deref(), world.as_deref(), seed, !no_web, ros2),
-        Command::Run { config, map, mode } => daemon::run_daemon(&config, map, mode),
+        Command::Run {
+            config,
+            map,
+            mode,
+            ignore_checksum,
+        } => daemon::run_daemon(&config, map, mode, ignore_checksum),
         Command::Probe { port } => sensor::probe(&port),
         Command::Record {
             port,
@@ -427,6 +452,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             strict,
             map,
             mode,
+            ignore_checksum,
             bag,
         } => {
             let mode: clsmap::pipeline::MapMode = mode
@@ -442,6 +468,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                     draw_loops,
                     strict,
                     start_from: map.as_deref().map(|m| (m, mode)),
+                    checksum: checksum_check(ignore_checksum),
                     log: Some(&log),
                 },
             )
@@ -456,12 +483,34 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             track,
             max_hypotheses,
             config,
-        } => localize::localize(&map, &scan, config.as_deref(), track, max_hypotheses),
+            ignore_checksum,
+        } => localize::localize(
+            &map,
+            checksum_check(ignore_checksum),
+            &scan,
+            config.as_deref(),
+            track,
+            max_hypotheses,
+        ),
         Command::Render {
             map,
             output,
             resolution,
-        } => mapping::render(&map, &output, resolution),
-        Command::View { map, bind } => view::view(&map, &bind),
+            ignore_checksum,
+        } => mapping::render(&map, checksum_check(ignore_checksum), &output, resolution),
+        Command::View {
+            map,
+            bind,
+            ignore_checksum,
+        } => view::view(&map, checksum_check(ignore_checksum), &bind),
+    }
+}
+
+/// The checksum check an `--ignore-checksum` flag asks for.
+fn checksum_check(ignore: bool) -> clsmap::map::file::ChecksumCheck {
+    if ignore {
+        clsmap::map::file::ChecksumCheck::Ignore
+    } else {
+        clsmap::map::file::ChecksumCheck::Verify
     }
 }

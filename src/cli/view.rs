@@ -11,12 +11,13 @@ use anyhow::Context as _;
 use clsmap::daemon::LiveStatus;
 use clsmap::daemon::web::server::{WebOptions, serve};
 use clsmap::daemon::web::{LiveView, MapView};
+use clsmap::map::file::ChecksumCheck;
 
-pub fn view(map: &Path, bind: &str) -> anyhow::Result<ExitCode> {
+pub fn view(map: &Path, checksum: ChecksumCheck, bind: &str) -> anyhow::Result<ExitCode> {
     let address = bind.parse().with_context(|| {
         format!("--bind {bind:?}: not an address and port such as 127.0.0.1:8080")
     })?;
-    let loaded = clsmap::map::file::load(map)
+    let loaded = clsmap::map::file::load_with(map, checksum)
         .with_context(|| format!("cannot show the map {}", map.display()))?;
     let contents = Arc::new(loaded.contents);
     let cls = &contents.cls;

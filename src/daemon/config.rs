@@ -151,6 +151,10 @@ pub struct MapSection {
     /// base stands still and the status turns LOST after this long; with 0
     /// here it never turns. Default 30 (a turn and a half at 0.3 rad/s).
     pub turn_for: f64,
+    /// Load `load` even when its checksum does not match (a map edited by
+    /// hand), with a warning; every other check still applies. Default
+    /// false: a damaged map is refused.
+    pub ignore_checksum: bool,
 }
 
 impl Default for MapSection {
@@ -161,6 +165,7 @@ impl Default for MapSection {
             on_bad_map: "refuse".into(),
             turn_rate: 0.3,
             turn_for: 30.0,
+            ignore_checksum: false,
         }
     }
 }
@@ -169,6 +174,15 @@ impl MapSection {
     /// The mode, once checked by [`DaemonConfig::validate`].
     pub fn mode(&self) -> Option<crate::pipeline::MapMode> {
         self.mode.parse().ok()
+    }
+
+    /// How `load`'s checksum is checked.
+    pub fn checksum_check(&self) -> crate::map::file::ChecksumCheck {
+        if self.ignore_checksum {
+            crate::map::file::ChecksumCheck::Ignore
+        } else {
+            crate::map::file::ChecksumCheck::Verify
+        }
     }
 
     /// Whether a bad map falls back to a new one.

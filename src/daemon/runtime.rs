@@ -200,7 +200,7 @@ pub(crate) fn start_map(
         }
         (_, exploration) => exploration,
     };
-    let loaded = crate::map::file::load(path)
+    let loaded = crate::map::file::load_with(path, config.map.checksum_check())
         .map_err(crate::pipeline::PipelineError::from)
         .and_then(|m| LiveMapper::from_map(config.mapper, m.contents, mode, explore_loaded, 0.0));
     match loaded {

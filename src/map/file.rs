@@ -32,9 +32,10 @@ use serde::{Deserialize, Serialize};
 
 use super::cls::loops::ClsmItem;
 use super::cls::store::{
-    self, SegmentRecord, StoreError, crc32, crc32_digest, io_error_at, parse_error, record,
-    shapes_from_checked_records,
+    self, SegmentRecord, StoreError, check_checksum, crc32_digest, io_error_at, parse_error,
+    record, shapes_from_checked_records,
 };
+pub use super::cls::store::{ChecksumCheck, ChecksumMismatch};
 use super::cls::{ClsMap, ClsMapConfig, LocalEdge, LocalRegion, LocalSource};
 use super::{Edge, EdgeKind};
 use super::{Keyframe, MapSegment};
@@ -206,6 +207,9 @@ pub struct MapContents {
 pub struct LoadedMap {
     pub contents: MapContents,
     pub version: u32,
+    /// The checksum did not match and [`ChecksumCheck::Ignore`] let the
+    /// file through (a warning names the file when it is read by path).
+    pub checksum_mismatch: Option<ChecksumMismatch>,
 }
 
 fn matrix(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
@@ -344,16 +348,37 @@ pub fn save(path: &Path, contents: &MapContents) -> Result<(), StoreError> {
 /// Reads a map file of either version; a corrupt, truncated, foreign or
 /// inconsistent file is refused with the reason.
 pub fn load(path: &Path) -> Result<LoadedMap, StoreError> {
+    load_with(path, ChecksumCheck::Verify)
+}
+
+/// [`load`], with the checksum checked as `check` says; a mismatch let
+/// through is logged as a warning naming the file.
+pub fn load_with(path: &Path, check: ChecksumCheck) -> Result<LoadedMap, StoreError> {
     let text = crate::files::durable::read_bounded(path, crate::files::durable::MAX_MAP_BYTES)
         .map_err(io_error_at(path))?;
-    decode(&text)
+    let loaded = decode_with(&text, check)?;
+    if let Some(m) = loaded.checksum_mismatch {
+        tracing::warn!(
+            map = %path.display(),
+            "checksum mismatch ignored (the file says {:#010x}, its contents give {:#010x}): \
+             the map was changed since it was written",
+            m.stored,
+            m.computed
+        );
+    }
+    Ok(loaded)
 }
 
 /// Parses and validates the contents of a map file of either version.
 pub fn decode(text: &str) -> Result<LoadedMap, StoreError> {
+    decode_with(text, ChecksumCheck::Verify)
+}
+
+/// [`decode`], with the checksum checked as `check` says.
+pub fn decode_with(text: &str, check: ChecksumCheck) -> Result<LoadedMap, StoreError> {
     let probe: Probe = serde_json::from_str(text).map_err(parse_error)?;
     if probe.format == store::FORMAT && probe.version == store::VERSION {
-        let shapes = store::decode(text)?;
+        let (shapes, checksum_mismatch) = store::decode_with(text, check)?;
         return Ok(LoadedMap {
             contents: MapContents {
                 cls: ClsMap::from_shapes(ClsMapConfig::default(), shapes)
@@ -361,6 +386,7 @@ pub fn decode(text: &str) -> Result<LoadedMap, StoreError> {
                 ..MapContents::default()
             },
             version: store::VERSION,
+            checksum_mismatch,
         });
     }
     if probe.format != FORMAT && probe.format != store::FORMAT {
@@ -376,13 +402,7 @@ pub fn decode(text: &str) -> Result<LoadedMap, StoreError> {
         return Err(StoreError::Format(file.format));
     }
     let raw = file.payload.get();
-    let computed = crc32(raw.as_bytes());
-    if computed != file.checksum {
-        return Err(StoreError::Checksum {
-            stored: file.checksum,
-            computed,
-        });
-    }
+    let checksum_mismatch = check_checksum(raw.as_bytes(), file.checksum, check)?;
     let payload: Payload = serde_json::from_str(raw).map_err(parse_error)?;
     let shapes = shapes_from_checked_records(&payload.segments)?;
     let cls =
@@ -391,6 +411,7 @@ pub fn decode(text: &str) -> Result<LoadedMap, StoreError> {
     Ok(LoadedMap {
         contents,
         version: VERSION,
+        checksum_mismatch,
     })
 }
 
@@ -520,6 +541,7 @@ fn checked_contents(cls: ClsMap, payload: Payload) -> Result<MapContents, StoreE
 mod tests {
     use super::*;
     use crate::map::cls::loops::items;
+    use crate::map::cls::store::crc32;
     use crate::map::cls::{ClsLoop, ClsSegment, ClsShape};
 
     fn square() -> ClsMap {
@@ -606,6 +628,50 @@ mod tests {
         c.walls[0].id = crate::geometry::SegmentId(4_000_000_000);
         let text = encode(&c).unwrap();
         assert!(matches!(decode(&text), Err(StoreError::Inconsistent(_))));
+    }
+
+    #[test]
+    fn an_edited_map_loads_only_when_its_checksum_is_ignored() {
+        let text = encode(&contents()).unwrap();
+        // An edit by hand: one number changed, the checksum left as it was.
+        let edited = text.replacen("0.005", "0.010", 1);
+        assert_ne!(edited, text);
+        assert!(matches!(decode(&edited), Err(StoreError::Checksum { .. })));
+        let loaded = decode_with(&edited, ChecksumCheck::Ignore).unwrap();
+        let m = loaded.checksum_mismatch.unwrap();
+        assert_ne!(m.stored, m.computed);
+        let original = decode(&text).unwrap();
+        assert!(original.checksum_mismatch.is_none());
+        assert_ne!(
+            format!("{:?}", loaded.contents),
+            format!("{:?}", original.contents),
+            "the edit is in the map loaded"
+        );
+        // An intact file under Ignore reports nothing.
+        let intact = decode_with(&text, ChecksumCheck::Ignore).unwrap();
+        assert!(intact.checksum_mismatch.is_none());
+        // Ignoring the checksum skips no other check.
+        let broken = edited.replacen("\"to\":1", "\"to\":9", 1);
+        assert!(matches!(
+            decode_with(&broken, ChecksumCheck::Ignore),
+            Err(StoreError::Inconsistent(_))
+        ));
+        // Version 1 likewise: a corner moved on both its segments loads;
+        // one moved on one segment opens the loop, refused all the same.
+        let v1 = store::encode(&items(square().shapes())).unwrap();
+        let v1_edited = v1.replace("[3.0,2.0]", "[3.5,2.0]");
+        assert!(matches!(
+            decode(&v1_edited),
+            Err(StoreError::Checksum { .. })
+        ));
+        let back = decode_with(&v1_edited, ChecksumCheck::Ignore).unwrap();
+        assert_eq!(back.version, 1);
+        assert!(back.checksum_mismatch.is_some());
+        let v1_open = v1.replacen("[3.0,2.0]", "[3.5,2.0]", 1);
+        assert!(matches!(
+            decode_with(&v1_open, ChecksumCheck::Ignore),
+            Err(StoreError::Invariant(_))
+        ));
     }
 
     #[test]

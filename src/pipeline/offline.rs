@@ -12,6 +12,7 @@ use super::{Mapper, PipelineError};
 use crate::eval::{EvalError, RelationErrors, evaluate_relations as evaluate_against};
 use crate::files::trajectory::StampedPose;
 use crate::input::{LogOptions, open_log_with};
+use crate::map::file::ChecksumCheck;
 use crate::pipeline::config::MapperConfig;
 
 /// Progress of [`run_offline_mapping`], reported after every scan.
@@ -34,6 +35,8 @@ pub struct MapRunOptions<'a> {
     /// Go on from a saved map, localizing in it or extending it, instead
     /// of starting a new one.
     pub start_from: Option<(&'a Path, MapMode)>,
+    /// How the saved map's checksum is checked.
+    pub checksum: ChecksumCheck,
     /// How the input is read (a bag's topics); the defaults when `None`.
     pub log: Option<&'a LogOptions>,
 }
@@ -60,11 +63,12 @@ pub fn run_offline_mapping(
         draw_loops,
         strict,
         start_from,
+        checksum,
         log,
     } = *options;
     let mut mapper = match start_from {
         Some((map, mode)) => {
-            let loaded = crate::map::file::load(map)?;
+            let loaded = crate::map::file::load_with(map, checksum)?;
             Mapper::from_map(*config, loaded.contents, mode)?
         }
         None => Mapper::new(*config),

@@ -142,3 +142,48 @@ fn decode_refuses_a_file_that_is_not_a_recording() {
         .says("not a clsmap recording");
     assert!(run.stdout.is_empty());
 }
+
+#[test]
+fn a_map_edited_by_hand_loads_only_with_ignore_checksum() {
+    let dir = TempDir::new("edited-map");
+    let out = dir.join("out");
+    map(&fixture(CSAIL_FIXTURE), &out, &[]).succeeded();
+    let text = std::fs::read_to_string(out.join("map.json")).unwrap();
+    // The first wall seen once more than it was: a valid number, a
+    // payload that no longer matches its checksum.
+    let key = "\"observations\":";
+    let at = text.find(key).unwrap() + key.len();
+    let digits = text[at..].find(|c: char| !c.is_ascii_digit()).unwrap();
+    let n: u64 = text[at..at + digits].parse().unwrap();
+    let edited = format!("{}{}{}", &text[..at], n + 1, &text[at + digits..]);
+    let edited_map = dir.join("edited.json");
+    std::fs::write(&edited_map, &edited).unwrap();
+    let svg = dir.join("edited.svg");
+
+    clsmap(&["render", arg(&edited_map), "-o", arg(&svg)])
+        .failed()
+        .says("checksum mismatch");
+    assert!(!svg.exists());
+    let run = clsmap(&[
+        "render",
+        arg(&edited_map),
+        "-o",
+        arg(&svg),
+        "--ignore-checksum",
+    ])
+    .succeeded();
+    assert!(run.stderr.contains("checksum mismatch ignored"), "{run}");
+    assert!(svg.is_file());
+
+    // Going on from it offline: refused, then taken with the flag.
+    let scans = fixture(CSAIL_FIXTURE);
+    let again = dir.join("again");
+    let from = ["--map", arg(&edited_map)];
+    map(&scans, &again, &from)
+        .failed()
+        .says("checksum mismatch");
+    let run = map(&scans, &again, &[from[0], from[1], "--ignore-checksum"]).succeeded();
+    assert!(run.stderr.contains("checksum mismatch ignored"), "{run}");
+    // The edited file itself is left as it was.
+    assert_eq!(std::fs::read_to_string(&edited_map).unwrap(), edited);
+}

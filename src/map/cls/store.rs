@@ -185,8 +185,52 @@ pub fn save_items(path: &Path, items: &[ClsmItem]) -> Result<(), StoreError> {
     crate::files::durable::write_atomically(path, text.as_bytes()).map_err(io_error(path))
 }
 
+/// Whether a map file's checksum is checked when it is read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ChecksumCheck {
+    /// A mismatch refuses the file: a damaged or edited map is never used
+    /// unknowingly.
+    #[default]
+    Verify,
+    /// A mismatch is reported (see [`ChecksumMismatch`]) and the file is
+    /// read if it is otherwise valid: for a map edited by hand. Every other
+    /// check (format, finite numbers, links, invariants) still applies.
+    Ignore,
+}
+
+/// A checksum that did not match, let through by [`ChecksumCheck::Ignore`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ChecksumMismatch {
+    pub stored: u32,
+    pub computed: u32,
+}
+
+/// `Ok(None)` when `stored` matches `bytes`, the mismatch when `check`
+/// lets it through, else [`StoreError::Checksum`].
+pub(crate) fn check_checksum(
+    bytes: &[u8],
+    stored: u32,
+    check: ChecksumCheck,
+) -> Result<Option<ChecksumMismatch>, StoreError> {
+    let computed = crc32(bytes);
+    match (computed == stored, check) {
+        (true, _) => Ok(None),
+        (false, ChecksumCheck::Ignore) => Ok(Some(ChecksumMismatch { stored, computed })),
+        (false, ChecksumCheck::Verify) => Err(StoreError::Checksum { stored, computed }),
+    }
+}
+
 /// Parses and validates the contents of a version-1 map file.
 pub fn decode(text: &str) -> Result<Vec<ClsShape>, StoreError> {
+    decode_with(text, ChecksumCheck::Verify).map(|(shapes, _)| shapes)
+}
+
+/// [`decode`], with the checksum checked as `check` says; also returns a
+/// mismatch that was let through.
+pub fn decode_with(
+    text: &str,
+    check: ChecksumCheck,
+) -> Result<(Vec<ClsShape>, Option<ChecksumMismatch>), StoreError> {
     let file: MapFile<'_> = serde_json::from_str(text).map_err(parse_error)?;
     if file.format != FORMAT {
         return Err(StoreError::Format(file.format));
@@ -197,15 +241,9 @@ pub fn decode(text: &str) -> Result<Vec<ClsShape>, StoreError> {
         });
     }
     let raw = file.segments.get();
-    let computed = CRC32.checksum(raw.as_bytes());
-    if computed != file.checksum {
-        return Err(StoreError::Checksum {
-            stored: file.checksum,
-            computed,
-        });
-    }
+    let mismatch = check_checksum(raw.as_bytes(), file.checksum, check)?;
     let segments: Vec<SegmentRecord> = serde_json::from_str(raw).map_err(parse_error)?;
-    shapes_from_checked_records(&segments)
+    Ok((shapes_from_checked_records(&segments)?, mismatch))
 }
 
 /// Checks `segments` (finite, indices in order, links in range) and
