@@ -30,7 +30,8 @@ fn map_tour(
 
 /// [`map_tour`]; with `latency`, optimisations run as background jobs
 /// whose results come back that many scans after they were taken, as
-/// the daemon's blocking thread gives them back while scans go on.
+/// the daemon's blocking thread gives them back while scans go on, and
+/// loop searches as jobs whose results come back after the next scan.
 fn map_tour_with(
     world: &World,
     truth: &[Pose2],
@@ -41,8 +42,9 @@ fn map_tour_with(
 ) -> (Mapper, f64, f64, usize) {
     let spec = ScanSpec::lms200_half_degree(0.01);
     let mut mapper = Mapper::new(config);
-    mapper.set_background_optimisation(latency.is_some());
+    mapper.set_background_loop_closure(latency.is_some());
     let mut in_flight: Option<(usize, clsmap::graph::OptimisationJob)> = None;
+    let mut searching: Option<(usize, clsmap::graph::LoopSearchJob)> = None;
     let mut applied = 0;
     for (k, (t, o)) in truth.iter().zip(odo).enumerate() {
         let scan = cast_scan(world, t, &spec, 100.0 + 0.2 * k as f64, rng);
@@ -51,6 +53,13 @@ fn map_tour_with(
             odometry: Some(*o),
         });
         if let Some(lag) = latency {
+            if searching.as_ref().is_some_and(|(since, _)| k > *since) {
+                let (_, job) = searching.take().unwrap();
+                mapper.apply_loop_search(job.run());
+            }
+            if searching.is_none() {
+                searching = mapper.take_loop_search().map(|job| (k, job));
+            }
             if in_flight
                 .as_ref()
                 .is_some_and(|(since, _)| k >= since + lag)
@@ -63,6 +72,9 @@ fn map_tour_with(
                 in_flight = mapper.take_optimisation().map(|job| (k, job));
             }
         }
+    }
+    if let Some((_, job)) = searching {
+        mapper.apply_loop_search(job.run());
     }
     if let Some((_, job)) = in_flight {
         mapper.apply_optimisation(job.run());
@@ -185,7 +197,8 @@ fn the_rebuild_from_keyframes_equals_the_incremental_maps() {
 /// each result comes back 10 scans (2 m) after its job was taken, while
 /// the mapper goes on localizing against the old map; the keyframes taken
 /// meanwhile follow the correction, and the map ends as good as with
-/// optimisations run at once.
+/// optimisations run at once. Loop searches run as jobs too, each result
+/// a scan late, and find the loops a search at each keyframe finds.
 #[test]
 fn optimisations_run_in_the_background_end_as_well_as_at_once() {
     let world = World::long_loop();
@@ -201,10 +214,15 @@ fn optimisations_run_in_the_background_end_as_well_as_at_once() {
         background.keyframe_graph().stats(),
     );
     eprintln!(
-        "at once {rmse_at_once:.4} m ({} optimisations), background {rmse_background:.4} m ({} optimisations)",
-        a.optimisations, b.optimisations
+        "at once {rmse_at_once:.4} m ({} optimisations, {} loops), background {rmse_background:.4} m ({} optimisations, {} loops)",
+        a.optimisations, a.accepted, b.optimisations, b.accepted
     );
     assert!(a.optimisations > 0 && b.optimisations > 0, "{a:?} {b:?}");
+    // Searched a scan late, the loops are found all the same.
+    assert!(
+        10 * b.accepted >= 8 * a.accepted && b.searched > 0,
+        "{a:?} {b:?}"
+    );
     assert!(
         rmse_background < 1.5 * rmse_at_once + 0.01,
         "{rmse_background} vs {rmse_at_once}"

@@ -26,7 +26,7 @@ use super::config::DaemonConfig;
 use super::live::{LiveMapper, LiveStatus};
 use super::web::{ControlCommand, LiveView, MapView};
 use crate::geometry::Pose2;
-use crate::graph::{OptimisationJob, OptimisationResult};
+use crate::graph::{LoopSearchJob, LoopSearchResult, OptimisationJob, OptimisationResult};
 use crate::input::lms200::range_scan;
 use crate::pipeline::{MapSearch, PipelineError, ScanOutcome};
 
@@ -785,6 +785,21 @@ impl Core {
         let job = self.live.take_optimisation()?;
         self.optimisation_in_flight = true;
         Some(job)
+    }
+
+    /// The newest keyframe's loop search, to run off the loop, when one is
+    /// wanted and none is running; its result goes to
+    /// [`handle_loop_search_done`](Self::handle_loop_search_done).
+    pub fn poll_loop_search(&mut self) -> Option<LoopSearchJob> {
+        self.live.take_loop_search()
+    }
+
+    /// A loop search's result, or `None` when its thread failed.
+    pub fn handle_loop_search_done(&mut self, result: Option<LoopSearchResult>) {
+        match result {
+            Some(result) => self.live.apply_loop_search(result),
+            None => self.live.abandon_loop_search(),
+        }
     }
 
     /// An optimisation's result, or `None` when its thread failed (the job

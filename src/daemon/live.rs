@@ -133,9 +133,9 @@ impl LiveMapper {
         &self.mapper
     }
 
-    /// See [`Mapper::set_background_optimisation`].
-    pub fn set_background_optimisation(&mut self, on: bool) {
-        self.mapper.set_background_optimisation(on);
+    /// See [`Mapper::set_background_loop_closure`].
+    pub fn set_background_loop_closure(&mut self, on: bool) {
+        self.mapper.set_background_loop_closure(on);
     }
 
     /// See [`Mapper::take_optimisation`].
@@ -154,6 +154,25 @@ impl LiveMapper {
     pub fn apply_optimisation(&mut self, result: crate::graph::OptimisationResult) {
         let _span = info_span!("apply_optimisation").entered();
         if let Some(c) = self.mapper.apply_optimisation(result) {
+            self.follow(&c);
+        }
+    }
+
+    /// See [`Mapper::take_loop_search`].
+    pub fn take_loop_search(&mut self) -> Option<crate::graph::LoopSearchJob> {
+        self.mapper.take_loop_search()
+    }
+
+    /// See [`Mapper::abandon_loop_search`].
+    pub fn abandon_loop_search(&mut self) {
+        self.mapper.abandon_loop_search();
+    }
+
+    /// See [`Mapper::apply_loop_search`]; a correction moves the live pose,
+    /// the picture's path and the explorer's goal as an optimisation does.
+    pub fn apply_loop_search(&mut self, result: crate::graph::LoopSearchResult) {
+        let _span = info_span!("apply_loop_search").entered();
+        if let Some(c) = self.mapper.apply_loop_search(result) {
             self.follow(&c);
         }
     }

@@ -36,7 +36,7 @@ use super::run_dir::RunDirs;
 use super::sensor::{RawTelegrams, ScanSlot, SensorOptions, SensorReport, SensorThread};
 use crate::error_chain;
 use crate::geometry::Pose2;
-use crate::graph::OptimisationResult;
+use crate::graph::{LoopSearchResult, OptimisationResult};
 
 /// Why the daemon could not start or finish.
 #[derive(Debug, thiserror::Error)]
@@ -395,7 +395,7 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     // Loop-closure optimisations and rebuilds run on a blocking thread; the
     // loop goes on localizing against the old map meanwhile.
     let mut live = start_map(&config, exploration)?;
-    live.set_background_optimisation(true);
+    live.set_background_loop_closure(true);
     let Hooks {
         shutdown: mut shutdown_signal,
         mut reload,
@@ -477,6 +477,8 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     let mut last_seq = 0;
     let mut writing: Option<JoinHandle<Result<(), CheckpointFailed>>> = None;
     let mut optimising: Option<JoinHandle<OptimisationResult>> = None;
+    // The newest keyframe's loop search runs beside the loop too.
+    let mut searching: Option<JoinHandle<LoopSearchResult>> = None;
     let reason = loop {
         let wake = Duration::try_from_secs_f64(core.poll_timeout())
             .ok()
@@ -522,6 +524,15 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
             } => {
                 optimising = None;
                 optimisation_done(&mut core, result);
+            }
+            result = async {
+                match searching.as_mut() {
+                    Some(task) => task.await,
+                    None => std::future::pending().await,
+                }
+            } => {
+                searching = None;
+                loop_search_done(&mut core, result);
             }
             Some(report) = report_rx.recv() => on_report(&mut core, &report),
             Some(command) = async {
@@ -595,6 +606,11 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
         if core.poll_checkpoint() {
             writing = start_checkpoint(&mut core, &mut dirs);
         }
+        if searching.is_none()
+            && let Some(job) = core.poll_loop_search()
+        {
+            searching = Some(tokio::task::spawn_blocking(move || job.run()));
+        }
         if optimising.is_none()
             && let Some(job) = core.poll_optimisation()
         {
@@ -613,6 +629,9 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     if let Some(task) = writing.take() {
         let result = task.await;
         checkpoint_done(&mut core, result);
+    }
+    if let Some(task) = searching.take() {
+        loop_search_done(&mut core, task.await);
     }
     if let Some(task) = optimising.take() {
         optimisation_done(&mut core, task.await);
@@ -732,6 +751,15 @@ fn optimisation_done(core: &mut Core, result: Result<OptimisationResult, tokio::
         error!("the loop-closure optimiser failed: {e}");
     }
     core.handle_optimisation_done(result.ok());
+}
+
+/// Takes in a background loop search's result; a search whose thread
+/// failed is dropped (the next keyframe's goes ahead).
+fn loop_search_done(core: &mut Core, result: Result<LoopSearchResult, tokio::task::JoinError>) {
+    if let Err(e) = &result {
+        error!("the loop search failed: {e}");
+    }
+    core.handle_loop_search_done(result.ok());
 }
 
 /// Re-reads the configuration (SIGHUP); a file that does not load is

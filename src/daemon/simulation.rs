@@ -145,7 +145,7 @@ impl VirtualRobot {
             .enabled
             .then_some((config.exploration.planner, config.exploration.drive));
         let mut live = super::runtime::start_map(&config, exploration)?;
-        live.set_background_optimisation(true);
+        live.set_background_loop_closure(true);
         let base = BaseDriver::new(
             Some(BaseDriver::once(Box::new(robot.base()))),
             config.base.limits(),
@@ -242,9 +242,14 @@ impl VirtualRobot {
             if outcome.rejection != Some(crate::pipeline::RejectionKind::NotFoundInTheMapYet) {
                 self.score(t, outcome.pose);
             }
-            // The daemon runs the optimisation on a blocking thread and
-            // takes the result in when it is done; here it is done at once,
-            // so runs stay deterministic on the virtual clock.
+            // The daemon runs the loop search and the optimisation on
+            // blocking threads and takes the results in when they are done;
+            // here they are done at once, so runs stay deterministic on the
+            // virtual clock.
+            if let Some(job) = self.core.poll_loop_search() {
+                let result = job.run();
+                self.core.handle_loop_search_done(Some(result));
+            }
             if let Some(job) = self.core.poll_optimisation() {
                 let result = job.run();
                 self.core.handle_optimisation_done(Some(result));

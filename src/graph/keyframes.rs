@@ -10,7 +10,8 @@ use serde::Serialize;
 use tracing::{debug, trace_span};
 
 use super::{
-    GraphError, LoopClosureConfig, LoopQuery, LoopRejection, OptimizeReport, PoseGraph, close_loop,
+    GraphError, LoopClosureConfig, LoopMatch, LoopQuery, LoopRejection, OptimizeReport, PoseGraph,
+    close_loop,
 };
 use crate::geometry::Pose2;
 use crate::localize::LocalizerConfig;
@@ -85,6 +86,87 @@ pub struct KeyframeGraph {
     jobs: u64,
     /// The next keyframe gets no chain edge (see [`Self::add_relocalized`]).
     unchained_next: bool,
+    /// In background mode: the newest keyframe waits for its loop search.
+    search_wanted: bool,
+    /// The keyframe whose loop search is in flight.
+    search_in_flight: Option<Arc<Keyframe>>,
+}
+
+/// A loop search for one keyframe over a snapshot of the keyframes and
+/// their poses: about 0.2 ms a keyframe on a large map (more when the
+/// voting search runs), to run off the real-time loop.
+#[derive(Debug, Clone)]
+pub struct LoopSearchJob {
+    keyframes: Vec<Arc<Keyframe>>,
+    poses: Vec<Pose2>,
+    current: usize,
+    allow_voting: bool,
+    fusion: SegmentMapConfig,
+    localizer: LocalizerConfig,
+    global: GlobalConfig,
+    cfg: LoopClosureConfig,
+    /// The keyframe searched for, to tell its result from a stale one.
+    keyframe: Arc<Keyframe>,
+}
+
+/// What a search found: a verified loop with its edge (measured at the
+/// searched poses), or why there was none; and how long it took.
+#[derive(Debug, Clone)]
+struct SearchOutcome {
+    found: Result<(LoopMatch, super::Edge), LoopRejection>,
+    elapsed_s: f64,
+}
+
+/// What a [`LoopSearchJob`] gives back.
+#[derive(Debug, Clone)]
+pub struct LoopSearchResult {
+    current: usize,
+    keyframe: Arc<Keyframe>,
+    searched: SearchOutcome,
+}
+
+impl LoopSearchJob {
+    /// Searches; runs anywhere, touches nothing but itself.
+    pub fn run(self) -> LoopSearchResult {
+        let query = LoopQuery {
+            keyframes: &self.keyframes,
+            poses: &self.poses,
+            current: self.current,
+            allow_voting: self.allow_voting,
+        };
+        let searched = Self::search(
+            &query,
+            &self.fusion,
+            &self.localizer,
+            &self.global,
+            &self.cfg,
+        );
+        LoopSearchResult {
+            current: self.current,
+            keyframe: self.keyframe,
+            searched,
+        }
+    }
+
+    fn search(
+        query: &LoopQuery<'_>,
+        fusion: &SegmentMapConfig,
+        localizer: &LocalizerConfig,
+        global: &GlobalConfig,
+        cfg: &LoopClosureConfig,
+    ) -> SearchOutcome {
+        let started = Instant::now();
+        let found = trace_span!("loop_search")
+            .in_scope(|| close_loop(query, fusion, localizer, global, cfg))
+            .map(|m| {
+                let edge = m.edge(query.current, &query.poses[m.keyframe], cfg);
+                (m, edge)
+            });
+        SearchOutcome {
+            found,
+            elapsed_s: started.elapsed().as_secs_f64(),
+        }
+    }
 }
 
 /// An optimisation of a snapshot of the graph, with the rebuild of the
@@ -221,9 +303,10 @@ impl KeyframeGraph {
         &self.stats
     }
 
-    /// Hands optimisations out as jobs ([`Self::take_job`]) instead of
-    /// running them inside [`Self::close_loop`].
-    pub fn set_background_optimisation(&mut self, on: bool) {
+    /// Hands loop searches and optimisations out as jobs
+    /// ([`Self::take_loop_search`], [`Self::take_job`]) instead of running
+    /// them where keyframes are added.
+    pub fn set_background_loop_closure(&mut self, on: bool) {
         self.background = on;
     }
 
@@ -363,6 +446,7 @@ impl KeyframeGraph {
             }
         }
         self.keyframes.push(Arc::new(keyframe));
+        self.search_wanted = self.background;
         index
     }
 
@@ -418,24 +502,107 @@ impl KeyframeGraph {
         global: &GlobalConfig,
         cfg: &LoopClosureConfig,
     ) -> Result<Option<Correction>, GraphError> {
-        let Some(current) = self.keyframes.len().checked_sub(1) else {
+        let Some(current) = self.searchable_newest(cfg) else {
             return Ok(None);
         };
-        if !cfg.enabled || current == 0 {
-            return Ok(None);
-        }
-        let started = Instant::now();
         let query = LoopQuery {
             keyframes: &self.keyframes,
             poses: self.graph.poses(),
             current,
-            allow_voting: self.taken.is_multiple_of(cfg.vote_every.max(1)),
+            allow_voting: self.voting_now(cfg),
         };
-        let found = trace_span!("loop_search")
-            .in_scope(|| close_loop(&query, fusion, localizer, global, cfg));
-        self.stats.search_s += started.elapsed().as_secs_f64();
-        let m = match found {
-            Ok(m) => m,
+        let searched = LoopSearchJob::search(&query, fusion, localizer, global, cfg);
+        self.take_found(current, searched, cfg)
+    }
+
+    /// The newest keyframe's index when a loop search may run for it.
+    fn searchable_newest(&self, cfg: &LoopClosureConfig) -> Option<usize> {
+        let current = self.keyframes.len().checked_sub(1)?;
+        (cfg.enabled && current > 0).then_some(current)
+    }
+
+    /// Whether the voting search may run for the newest keyframe.
+    fn voting_now(&self, cfg: &LoopClosureConfig) -> bool {
+        self.taken.is_multiple_of(cfg.vote_every.max(1))
+    }
+
+    /// Whether the newest keyframe waits for its loop search (handed out
+    /// as a job in background mode, see [`Self::take_loop_search`]).
+    pub fn wants_loop_search(&self) -> bool {
+        self.search_wanted
+    }
+
+    /// The loop search of the newest keyframe as a job over a snapshot of
+    /// the keyframes and poses, when it wants one and none is in flight;
+    /// its result goes to [`Self::apply_loop_search`].
+    pub fn take_loop_search(
+        &mut self,
+        fusion: &SegmentMapConfig,
+        localizer: &LocalizerConfig,
+        global: &GlobalConfig,
+        cfg: &LoopClosureConfig,
+    ) -> Option<LoopSearchJob> {
+        if !self.search_wanted || self.search_in_flight.is_some() {
+            return None;
+        }
+        self.search_wanted = false;
+        let current = self.searchable_newest(cfg)?;
+        let keyframe = Arc::clone(&self.keyframes[current]);
+        self.search_in_flight = Some(Arc::clone(&keyframe));
+        Some(LoopSearchJob {
+            keyframes: self.keyframes.clone(),
+            poses: self.graph.poses().to_vec(),
+            current,
+            allow_voting: self.voting_now(cfg),
+            fusion: *fusion,
+            localizer: *localizer,
+            global: *global,
+            cfg: *cfg,
+            keyframe,
+        })
+    }
+
+    /// The loop search in flight was lost (its thread failed); the next
+    /// keyframe's search goes ahead.
+    pub fn abandon_loop_search(&mut self) {
+        self.search_in_flight = None;
+    }
+
+    /// Takes in a loop search's result as [`Self::close_loop`] would have:
+    /// a verified loop becomes an edge (measured against the snapshot's
+    /// poses, so the optimisations since do not skew it). The result of a
+    /// keyframe no longer in the graph (or of another search than the
+    /// one in flight) is dropped.
+    pub fn apply_loop_search(
+        &mut self,
+        result: LoopSearchResult,
+        cfg: &LoopClosureConfig,
+    ) -> Result<Option<Correction>, GraphError> {
+        let in_flight = self.search_in_flight.take();
+        let ours = in_flight.is_some_and(|k| Arc::ptr_eq(&k, &result.keyframe));
+        let here = self
+            .keyframes
+            .get(result.current)
+            .is_some_and(|k| Arc::ptr_eq(k, &result.keyframe));
+        if !ours || !here {
+            self.stats.search_s += result.searched.elapsed_s;
+            return Ok(None);
+        }
+        self.take_found(result.current, result.searched, cfg)
+    }
+
+    /// What a search for keyframe `current` found, taken into the graph:
+    /// counted, and a verified loop added as an edge; optimised at once
+    /// when the graph disagrees with it (in the foreground).
+    fn take_found(
+        &mut self,
+        current: usize,
+        searched: SearchOutcome,
+        cfg: &LoopClosureConfig,
+    ) -> Result<Option<Correction>, GraphError> {
+        self.stats.search_s += searched.elapsed_s;
+        let (m, edge) = match searched.found {
+            Ok(found) => found,
             Err(LoopRejection::NoCandidate) => return Ok(None),
             Err(why) => {
                 debug!(keyframe = current, "no loop: {why:?}");
@@ -448,7 +615,6 @@ impl KeyframeGraph {
         self.stats.accepted += 1;
         self.stats.by_voting += usize::from(m.by_voting);
         let poses = self.graph.poses();
-        let edge = m.edge(current, &poses[m.keyframe], cfg);
         let residual = super::edge_error(&edge, &poses[m.keyframe], &poses[current]);
         let chi2 = residual.dot(&(edge.information * residual));
         debug!(
@@ -459,14 +625,15 @@ impl KeyframeGraph {
             "loop closed"
         );
         if chi2 <= cfg.optimize_above_chi2 {
-            self.newest_agrees = true;
+            // Only the newest keyframe may be merged as a revisit.
+            self.newest_agrees = current + 1 == self.keyframes.len();
             // Loops the graph already agrees with stiffen it only a little;
             // one every few keyframes keeps the graph sparse where a robot
             // patrols (a loop edge at every keyframe of a small floor makes
             // its factor dense).
             let recent = self
                 .last_loop_keyframe
-                .is_some_and(|k| current - k < cfg.agreeing_loop_spacing);
+                .is_some_and(|k| current.saturating_sub(k) < cfg.agreeing_loop_spacing);
             if !recent {
                 self.graph.add_edge(edge)?;
                 self.unoptimised_loops += 1;

@@ -28,7 +28,8 @@ pub use closure::{
     LoopClosureConfig, LoopMatch, LoopQuery, LoopRejection, close_loop, loop_candidates,
 };
 pub use keyframes::{
-    AppliedOptimisation, Correction, KeyframeGraph, LoopStats, OptimisationJob, OptimisationResult,
+    AppliedOptimisation, Correction, KeyframeGraph, LoopSearchJob, LoopSearchResult, LoopStats,
+    OptimisationJob, OptimisationResult,
 };
 
 use crate::geometry::{Pose2, wrap_angle};

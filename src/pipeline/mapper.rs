@@ -16,7 +16,8 @@ use super::{MapSearch, PipelineError, ScanOutcome};
 use crate::files::trajectory::StampedPose;
 use crate::geometry::{CogLine, LineExtractor, Pose2, SegmentIndex, wrap_angle};
 use crate::graph::{
-    AppliedOptimisation, Correction, KeyframeGraph, OptimisationJob, OptimisationResult,
+    AppliedOptimisation, Correction, KeyframeGraph, LoopSearchJob, LoopSearchResult,
+    OptimisationJob, OptimisationResult,
 };
 use crate::input::ScanRecord;
 use crate::localize::global::GlobalConfig;
@@ -78,6 +79,9 @@ pub struct Mapper {
     start: Option<StartSearch>,
     seed: Option<(Pose2, [[f64; 3]; 3])>,
     first_session_keyframe: bool,
+    /// Whether the keyframe whose loop search runs in the background is the
+    /// session's first (merged as a revisit, the next kept one is).
+    searching_session_start: bool,
     /// Scans in a row not localized against the loaded map, and the search
     /// that runs once there are [`LOST_AFTER_SCANS`].
     lost_scans: usize,
@@ -121,6 +125,7 @@ impl Mapper {
             start: None,
             seed: None,
             first_session_keyframe: false,
+            searching_session_start: false,
             lost_scans: 0,
             relocalizer: None,
             hinted: false,
@@ -229,6 +234,7 @@ impl Mapper {
     /// the trajectory and both maps up to date; the newest keyframe's
     /// correction when the poses moved. The end of a run calls it last.
     pub fn settle(&mut self) -> Option<Pose2> {
+        self.search_now();
         let moved = match self.graph.settle(&self.config.loop_closure) {
             Ok(Some(c)) => {
                 self.apply_correction(&c);
@@ -247,7 +253,7 @@ impl Mapper {
     /// Whether the map is up to date with every loop closed so far
     /// ([`settle`](Self::settle) would change nothing).
     pub fn is_settled(&self) -> bool {
-        self.graph.is_settled() && !self.cls_stale
+        self.graph.is_settled() && !self.graph.wants_loop_search() && !self.cls_stale
     }
 
     /// Rebuilds the CLS map from the keyframes if a loop closure moved
@@ -434,11 +440,12 @@ impl Mapper {
         }
     }
 
-    /// Runs pose-graph optimisations as jobs taken with
+    /// Runs loop searches and pose-graph optimisations as jobs taken with
+    /// [`take_loop_search`](Self::take_loop_search) and
     /// [`take_optimisation`](Self::take_optimisation) (to run off the
     /// real-time loop) instead of inside [`process`](Self::process).
-    pub fn set_background_optimisation(&mut self, on: bool) {
-        self.graph.set_background_optimisation(on);
+    pub fn set_background_loop_closure(&mut self, on: bool) {
+        self.graph.set_background_loop_closure(on);
     }
 
     /// The optimisation a closed loop asks for, if any and none is in
@@ -450,6 +457,71 @@ impl Mapper {
             self.config.cls_map(),
             &self.config.loop_closure,
         )
+    }
+
+    /// The loop search the newest keyframe waits for (background mode),
+    /// if none is in flight; run it anywhere ([`LoopSearchJob::run`]) and
+    /// hand the result to [`apply_loop_search`](Self::apply_loop_search).
+    pub fn take_loop_search(&mut self) -> Option<LoopSearchJob> {
+        self.graph.take_loop_search(
+            &self.config.map,
+            &self.config.localizer,
+            &GlobalConfig::default(),
+            &self.config.loop_closure,
+        )
+    }
+
+    /// A job taken with [`take_loop_search`](Self::take_loop_search) was
+    /// lost (its thread failed).
+    pub fn abandon_loop_search(&mut self) {
+        self.graph.abandon_loop_search();
+    }
+
+    /// Takes in a loop search's result as a search inside
+    /// [`process`](Self::process) would have been: a loop that moves the
+    /// map asks for an optimisation (a job), and a loop at a place already
+    /// kept merges the newest keyframe into it, re-anchoring the scans
+    /// taken since on the kept one. Returns the map-frame correction of
+    /// the newest keyframe if the poses moved (foreground optimisation).
+    pub fn apply_loop_search(&mut self, result: LoopSearchResult) -> Option<Pose2> {
+        let newest = self.graph.len().checked_sub(1)?;
+        let newest_pose = self.graph.poses()[newest];
+        match self
+            .graph
+            .apply_loop_search(result, &self.config.loop_closure)
+        {
+            Ok(Some(c)) => {
+                self.apply_correction(&c);
+                Some(c.correction)
+            }
+            Ok(None) => {
+                let near = self.graph.merge_revisit(&self.config.loop_closure)?;
+                let kept = self.graph.poses()[near];
+                for anchor in self.anchors.iter_mut().rev() {
+                    match anchor {
+                        Some((k, relative)) if *k == newest => {
+                            *anchor = Some((near, kept.between(&newest_pose.compose(relative))));
+                        }
+                        _ => break,
+                    }
+                }
+                self.anchor_keyframe = Some(near);
+                self.first_session_keyframe |= self.searching_session_start;
+                None
+            }
+            Err(e) => {
+                warn!("pose graph not optimised: {e}");
+                None
+            }
+        }
+    }
+
+    /// Runs the loop search the newest keyframe waits for, here and now
+    /// (before the last optimisation of a run).
+    fn search_now(&mut self) {
+        if let Some(job) = self.take_loop_search() {
+            self.apply_loop_search(job.run());
+        }
     }
 
     /// A pose hint from outside: the robot is at `pose` (map frame) now,
@@ -797,12 +869,18 @@ impl Mapper {
                     );
                 }
                 self.anchor_keyframe = None;
-                let closed = self.graph.close_loop(
-                    &self.config.map,
-                    &self.config.localizer,
-                    &GlobalConfig::default(),
-                    &self.config.loop_closure,
-                );
+                // In the background the search is a job (`take_loop_search`).
+                self.searching_session_start = session_start;
+                let closed = if self.graph.wants_loop_search() {
+                    Ok(None)
+                } else {
+                    self.graph.close_loop(
+                        &self.config.map,
+                        &self.config.localizer,
+                        &GlobalConfig::default(),
+                        &self.config.loop_closure,
+                    )
+                };
                 match closed {
                     Ok(Some(correction)) => {
                         self.apply_correction(&correction);
