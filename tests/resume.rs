@@ -331,6 +331,12 @@ fn a_kidnapped_robot_is_found_again_and_the_map_learns_nothing_meanwhile() {
         missed && missed_after <= 1.0,
         "missed after {missed_after:.2} s"
     );
+    // Found again before any tick saw it lost: nothing was kept from the
+    // scans at the wrong pose, at most the scan that found it.
+    assert!(
+        robot.live().mapper().summary().keyframes <= keyframes_before + 1,
+        "keyframes kept while lost"
+    );
     // Tick by tick until found again: while lost, the map stays as it was
     // (the scan that finds the robot may add to it, at the right pose).
     let counts = |r: &VirtualRobot| {

@@ -75,8 +75,9 @@ pub struct KeyframeGraph {
     last_taken: Option<Pose2>,
     /// Keyframes taken, kept or merged: the voting cadence counts these.
     taken: usize,
-    /// Optimisations are handed out as [`OptimisationJob`]s to run off the
-    /// caller's thread instead of running inside [`Self::close_loop`].
+    /// Loop searches and optimisations are handed out as
+    /// [`LoopSearchJob`]s and [`OptimisationJob`]s to run off the caller's
+    /// thread instead of running where keyframes are added.
     background: bool,
     /// A loop moved the map and no job has taken it in yet.
     wants_optimisation: bool,
@@ -502,6 +503,8 @@ impl KeyframeGraph {
         global: &GlobalConfig,
         cfg: &LoopClosureConfig,
     ) -> Result<Option<Correction>, GraphError> {
+        // Searched here, not as a job.
+        self.search_wanted = false;
         let Some(current) = self.searchable_newest(cfg) else {
             return Ok(None);
         };
@@ -532,9 +535,18 @@ impl KeyframeGraph {
         self.search_wanted
     }
 
+    /// Whether a loop search waits or is in flight: its result may still
+    /// close a loop.
+    pub fn loop_search_pending(&self) -> bool {
+        self.search_wanted || self.search_in_flight.is_some()
+    }
+
     /// The loop search of the newest keyframe as a job over a snapshot of
     /// the keyframes and poses, when it wants one and none is in flight;
-    /// its result goes to [`Self::apply_loop_search`].
+    /// its result goes to [`Self::apply_loop_search`]. Keyframes taken
+    /// while a search runs wait as one: only the newest of them is searched
+    /// next (a search takes about 0.2 ms, keyframes come tenths of a
+    /// second apart, so this is rare).
     pub fn take_loop_search(
         &mut self,
         fusion: &SegmentMapConfig,
@@ -720,8 +732,9 @@ impl KeyframeGraph {
             .collect()
     }
 
-    /// Whether every loop edge is optimised in and no job is in flight:
-    /// [`settle`](Self::settle) would change nothing.
+    /// Whether every loop edge is optimised in and no optimisation job is
+    /// in flight: [`settle`](Self::settle) would change nothing. (A loop
+    /// search waiting or in flight is [`Self::loop_search_pending`].)
     pub fn is_settled(&self) -> bool {
         self.unoptimised_loops == 0 && !self.wants_optimisation && self.in_flight.is_none()
     }

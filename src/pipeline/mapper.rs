@@ -79,9 +79,9 @@ pub struct Mapper {
     start: Option<StartSearch>,
     seed: Option<(Pose2, [[f64; 3]; 3])>,
     first_session_keyframe: bool,
-    /// Whether the keyframe whose loop search runs in the background is the
-    /// session's first (merged as a revisit, the next kept one is).
-    searching_session_start: bool,
+    /// Whether the newest keyframe is the session's first (merged as a
+    /// revisit after its background loop search, the next kept one is).
+    newest_is_session_start: bool,
     /// Scans in a row not localized against the loaded map, and the search
     /// that runs once there are [`LOST_AFTER_SCANS`].
     lost_scans: usize,
@@ -125,7 +125,7 @@ impl Mapper {
             start: None,
             seed: None,
             first_session_keyframe: false,
-            searching_session_start: false,
+            newest_is_session_start: false,
             lost_scans: 0,
             relocalizer: None,
             hinted: false,
@@ -253,7 +253,7 @@ impl Mapper {
     /// Whether the map is up to date with every loop closed so far
     /// ([`settle`](Self::settle) would change nothing).
     pub fn is_settled(&self) -> bool {
-        self.graph.is_settled() && !self.graph.wants_loop_search() && !self.cls_stale
+        self.graph.is_settled() && !self.graph.loop_search_pending() && !self.cls_stale
     }
 
     /// Rebuilds the CLS map from the keyframes if a loop closure moved
@@ -479,41 +479,46 @@ impl Mapper {
 
     /// Takes in a loop search's result as a search inside
     /// [`process`](Self::process) would have been: a loop that moves the
-    /// map asks for an optimisation (a job), and a loop at a place already
-    /// kept merges the newest keyframe into it, re-anchoring the scans
-    /// taken since on the kept one. Returns the map-frame correction of
-    /// the newest keyframe if the poses moved (foreground optimisation).
+    /// map asks for an optimisation (a job: searches are jobs only in
+    /// background mode, where optimisations are too), and a loop at a place
+    /// already kept merges the newest keyframe into it, re-anchoring the
+    /// scans taken since on the kept one. Returns the map-frame correction
+    /// of the newest keyframe if the poses moved (never in background
+    /// mode, where the optimisation is a job of its own).
     pub fn apply_loop_search(&mut self, result: LoopSearchResult) -> Option<Pose2> {
-        let newest = self.graph.len().checked_sub(1)?;
-        let newest_pose = self.graph.poses()[newest];
         match self
             .graph
             .apply_loop_search(result, &self.config.loop_closure)
         {
             Ok(Some(c)) => {
                 self.apply_correction(&c);
-                Some(c.correction)
+                return Some(c.correction);
             }
-            Ok(None) => {
-                let near = self.graph.merge_revisit(&self.config.loop_closure)?;
-                let kept = self.graph.poses()[near];
-                for anchor in self.anchors.iter_mut().rev() {
-                    match anchor {
-                        Some((k, relative)) if *k == newest => {
-                            *anchor = Some((near, kept.between(&newest_pose.compose(relative))));
-                        }
-                        _ => break,
-                    }
-                }
-                self.anchor_keyframe = Some(near);
-                self.first_session_keyframe |= self.searching_session_start;
-                None
-            }
+            Ok(None) => {}
             Err(e) => {
                 warn!("pose graph not optimised: {e}");
-                None
+                return None;
             }
         }
+        let newest = self.graph.len().checked_sub(1)?;
+        let newest_pose = self.graph.poses()[newest];
+        let near = self.graph.merge_revisit(&self.config.loop_closure)?;
+        let kept = self.graph.poses()[near];
+        // Scans since the merged keyframe hang on it, or on nothing (a
+        // resumed session's scans before its first keyframe); earlier ones
+        // on earlier keyframes.
+        for anchor in self.anchors.iter_mut().rev() {
+            match anchor {
+                Some((k, relative)) if *k == newest => {
+                    *anchor = Some((near, kept.between(&newest_pose.compose(relative))));
+                }
+                None => {}
+                Some(_) => break,
+            }
+        }
+        self.anchor_keyframe = Some(near);
+        self.first_session_keyframe |= self.newest_is_session_start;
+        None
     }
 
     /// Runs the loop search the newest keyframe waits for, here and now
@@ -870,7 +875,7 @@ impl Mapper {
                 }
                 self.anchor_keyframe = None;
                 // In the background the search is a job (`take_loop_search`).
-                self.searching_session_start = session_start;
+                self.newest_is_session_start = session_start;
                 let closed = if self.graph.wants_loop_search() {
                     Ok(None)
                 } else {
