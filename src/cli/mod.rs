@@ -468,7 +468,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
                     draw_loops,
                     strict,
                     start_from: map.as_deref().map(|m| (m, mode)),
-                    checksum: checksum_check(ignore_checksum),
+                    checksum: clsmap::map::file::ChecksumCheck::ignoring(ignore_checksum),
                     log: Some(&log),
                 },
             )
@@ -486,7 +486,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             ignore_checksum,
         } => localize::localize(
             &map,
-            checksum_check(ignore_checksum),
+            clsmap::map::file::ChecksumCheck::ignoring(ignore_checksum),
             &scan,
             config.as_deref(),
             track,
@@ -497,20 +497,20 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
             output,
             resolution,
             ignore_checksum,
-        } => mapping::render(&map, checksum_check(ignore_checksum), &output, resolution),
+        } => mapping::render(
+            &map,
+            clsmap::map::file::ChecksumCheck::ignoring(ignore_checksum),
+            &output,
+            resolution,
+        ),
         Command::View {
             map,
             bind,
             ignore_checksum,
-        } => view::view(&map, checksum_check(ignore_checksum), &bind),
-    }
-}
-
-/// The checksum check an `--ignore-checksum` flag asks for.
-fn checksum_check(ignore: bool) -> clsmap::map::file::ChecksumCheck {
-    if ignore {
-        clsmap::map::file::ChecksumCheck::Ignore
-    } else {
-        clsmap::map::file::ChecksumCheck::Verify
+        } => view::view(
+            &map,
+            clsmap::map::file::ChecksumCheck::ignoring(ignore_checksum),
+            &bind,
+        ),
     }
 }

@@ -178,11 +178,7 @@ impl MapSection {
 
     /// How `load`'s checksum is checked.
     pub fn checksum_check(&self) -> crate::map::file::ChecksumCheck {
-        if self.ignore_checksum {
-            crate::map::file::ChecksumCheck::Ignore
-        } else {
-            crate::map::file::ChecksumCheck::Verify
-        }
+        crate::map::file::ChecksumCheck::ignoring(self.ignore_checksum)
     }
 
     /// Whether a bad map falls back to a new one.

@@ -516,21 +516,11 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
                     }
                 }
             }
-            result = async {
-                match optimising.as_mut() {
-                    Some(task) => task.await,
-                    None => std::future::pending().await,
-                }
-            } => {
+            result = finished(&mut optimising) => {
                 optimising = None;
                 optimisation_done(&mut core, result);
             }
-            result = async {
-                match searching.as_mut() {
-                    Some(task) => task.await,
-                    None => std::future::pending().await,
-                }
-            } => {
+            result = finished(&mut searching) => {
                 searching = None;
                 loop_search_done(&mut core, result);
             }
@@ -552,12 +542,7 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
                 core.handle_tick(clock(), None);
                 notifier.loop_alive(Instant::now());
             }
-            result = async {
-                match writing.as_mut() {
-                    Some(task) => task.await,
-                    None => std::future::pending().await,
-                }
-            } => {
+            result = finished(&mut writing) => {
                 writing = None;
                 checkpoint_done(&mut core, result);
             }
@@ -741,6 +726,15 @@ fn checkpoint_done(
             error!("the checkpoint writer failed, its poses are lost: {e}");
             core.handle_checkpoint_lost();
         }
+    }
+}
+
+/// The result of `task` once it has finished; never, while there is none
+/// (a `select!` branch that waits for a blocking job if one runs).
+async fn finished<T>(task: &mut Option<JoinHandle<T>>) -> Result<T, tokio::task::JoinError> {
+    match task {
+        Some(task) => task.await,
+        None => std::future::pending().await,
     }
 }
 

@@ -198,6 +198,18 @@ pub enum ChecksumCheck {
     Ignore,
 }
 
+impl ChecksumCheck {
+    /// [`Ignore`](Self::Ignore) when `ignore` (an `--ignore-checksum`
+    /// flag or setting), else [`Verify`](Self::Verify).
+    pub fn ignoring(ignore: bool) -> Self {
+        if ignore {
+            ChecksumCheck::Ignore
+        } else {
+            ChecksumCheck::Verify
+        }
+    }
+}
+
 /// A checksum that did not match, let through by [`ChecksumCheck::Ignore`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ChecksumMismatch {
