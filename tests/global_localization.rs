@@ -202,12 +202,15 @@ fn the_middle_of_a_plain_corridor_is_ambiguous() {
 
 #[test]
 fn a_rotation_in_place_resolves_a_symmetric_view() {
-    // A 10 m × 6 m room with a 1.5 m block in its west half. Facing east
-    // from (5.5, 3) the robot sees the same as facing west from (4.5, 3)
-    // would in a room without the block; after a half turn it sees the block.
+    // A 10 m × 6 m room with a 0.5 m pillar by the middle of its north
+    // wall (x 4.75–5.25). Facing east from (5.5, 3) the robot sees the
+    // room's east half, the same as facing west from (4.5, 3) shows of the
+    // west half; neither view reaches the pillar. After a half turn the
+    // pillar is on the robot's right, where at the twin place it would be
+    // on its left.
     let mut world = World::new();
     world.add_polyline(&[[0.0, 0.0], [10.0, 0.0], [10.0, 6.0], [0.0, 6.0]], true);
-    world.add_box([2.25, 3.0], [0.75, 0.75], 0.0);
+    world.add_box([5.0, 5.7], [0.25, 0.25], 0.0);
     let poses = path(
         &[
             [5.0, 1.0],

@@ -237,6 +237,12 @@ pub(crate) fn refine(
     }
 }
 
+/// Votes (m of local line) this close count as tied.
+const TIED_VOTES: f64 = 1e-6;
+/// At most this many times [`GlobalConfig::refine_candidates`] are refined
+/// when votes tie at the cut.
+const TIED_CANDIDATES_FACTOR: usize = 4;
+
 /// Global localization of one scan: `lines` in the robot frame (from
 /// [`extract_lines`](crate::geometry::extract_lines)), `map` in the map
 /// frame. Returns the distinct candidate poses, best first.
@@ -306,10 +312,26 @@ pub fn global_localize(
             .then(a.pose.y.total_cmp(&b.pose.y))
             .then(a.pose.theta.total_cmp(&b.pose.theta))
     });
+    // Votes tied with the last candidate taken are taken too: a scan of
+    // few lines (a corridor's end: one wall and the end wall) gives dozens
+    // of places the same vote, and whichever the sort put last would never
+    // be refined, however well it explains the scan. Past the cap, the
+    // places left out could hold the best, so the answer is not clear.
+    let wanted = cfg.refine_candidates.max(1);
     let mut candidates: Vec<Vote> = Vec::new();
+    let mut tied_left_out = false;
     for v in votes {
-        if candidates.len() >= cfg.refine_candidates.max(1) {
-            break;
+        if candidates.len() >= wanted {
+            let tied = candidates
+                .last()
+                .is_some_and(|c| v.score >= c.score - TIED_VOTES);
+            if !tied {
+                break;
+            }
+            if candidates.len() >= TIED_CANDIDATES_FACTOR * wanted {
+                tied_left_out = true;
+                break;
+            }
         }
         if candidates
             .iter()
@@ -324,7 +346,9 @@ pub fn global_localize(
         .iter()
         .map(|v| refine(&local, map, v.pose, &prior, v.score, cfg))
         .collect();
-    Ok(rank(hyps, cfg))
+    let mut result = rank(hyps, cfg);
+    result.ambiguous |= tied_left_out;
+    Ok(result)
 }
 
 #[cfg(test)]
@@ -403,6 +427,54 @@ mod tests {
                 "{p:?} missing from {r:?}"
             );
         }
+    }
+
+    #[test]
+    fn a_place_whose_vote_ties_with_many_is_still_refined() {
+        // The end of a corridor seen from in front of it: one long wall
+        // and the end wall, 2 lines. Forty shorter walls ending in the
+        // same corner, each a place the two lines vote for as much as for
+        // the true one, come before it in the vote order; only the true
+        // one explains the whole scan once refined.
+        let corner = |x: f64, length: f64| {
+            vec![
+                CogLine::from_centre(
+                    0.0,
+                    [x - 0.5 * length, 0.0],
+                    -0.5 * length,
+                    0.5 * length,
+                    0.001,
+                    0.002,
+                    50,
+                ),
+                CogLine::from_centre(
+                    std::f64::consts::FRAC_PI_2,
+                    [x, 1.0],
+                    -1.0,
+                    1.0,
+                    0.001,
+                    0.002,
+                    50,
+                ),
+            ]
+        };
+        let mut walls: Vec<CogLine> = (0..40).flat_map(|k| corner(20.0 * k as f64, 6.0)).collect();
+        let truth_corner = corner(2000.0, 9.5);
+        walls.extend(truth_corner.iter().copied());
+        let map = GlobalMap::new(walls);
+        let truth = Pose2::new(1998.5, 1.5, -1.36);
+        let r = global_localize(
+            &seen_from(&truth_corner, &truth),
+            &map,
+            &GlobalConfig::default(),
+        )
+        .unwrap();
+        let best = r.best().unwrap();
+        assert!(
+            (best.pose.x - truth.x).hypot(best.pose.y - truth.y) < 1e-3,
+            "{r:?}"
+        );
+        assert!(!r.ambiguous, "{r:?}");
     }
 
     #[test]

@@ -155,37 +155,65 @@ impl LineTable {
 impl LineTable {
     /// Gives a virtual edge of the union the origin of a wall it lies on:
     /// nearly parallel, same direction (free space on the same side), both
-    /// ends within `tolerance` (m) of the wall's line and within its extent
-    /// widened by `tolerance`. Such an edge is a scan's frontier that noise
+    /// ends within `tolerance` (m) of the wall's line, and its whole length
+    /// within the extents (widened by `tolerance`) of such walls — one, or
+    /// several pieces of one straight wall end to end; the edge takes the
+    /// piece it overlaps most. Such an edge is a scan's frontier that noise
     /// put a few millimetres beyond the fitted wall, where the union keeps
     /// it instead of the wall; an actual segment must win over a virtual
-    /// one lying on it. The walls are found through the spatial index, so
-    /// this costs O(log n) per edge.
+    /// one lying on it. A gap between the pieces (a doorway on the wall's
+    /// line) leaves the edge virtual. The walls are found through the
+    /// spatial index, so this costs O(log n) per edge.
     pub fn recover_walls(&self, contour: &mut [RegionEdge], tolerance: f64) {
-        let gates = CorrespondenceConfig {
-            max_angle_diff: 0.087,
-            max_centre_distance: tolerance,
-            extent_tolerance: tolerance,
-        };
+        let mut pieces: Vec<(f64, f64, u32)> = Vec::new();
         for e in contour
             .iter_mut()
             .filter(|e| e.origin == EdgeOrigin::Virtual)
         {
-            if e.start == e.end {
+            let length = distance(e.start, e.end);
+            if length == 0.0 {
                 continue;
             }
+            let u = [
+                (e.end[0] - e.start[0]) / length,
+                (e.end[1] - e.start[1]) / length,
+            ];
+            let along_edge = |p: [f64; 2]| (p[0] - e.start[0]) * u[0] + (p[1] - e.start[1]) * u[1];
             let probe = line_between(e.start, e.end);
-            let wall = self.index.candidates(&probe, &gates).find(|id| {
-                self.lines.get(id.0 as usize).is_some_and(|l| {
-                    let (s0, s1) = l.extent();
-                    let (lo, hi) = (s0.min(s1) - tolerance, s0.max(s1) + tolerance);
-                    [e.start, e.end].iter().all(|&p| {
-                        l.distance_to_point(p) <= tolerance && (lo..=hi).contains(&l.along(p))
-                    })
-                })
-            });
-            if let Some(id) = wall {
-                e.origin = EdgeOrigin::Actual(id.0);
+            // Along the line the gate is as wide as the edge, so a piece
+            // that covers only part of a long edge is still a candidate.
+            let gates = CorrespondenceConfig {
+                max_angle_diff: 0.087,
+                max_centre_distance: tolerance,
+                extent_tolerance: tolerance + length,
+            };
+            pieces.clear();
+            pieces.extend(self.index.candidates(&probe, &gates).filter_map(|id| {
+                let l = self.lines.get(id.0 as usize)?;
+                let on_line = [e.start, e.end]
+                    .iter()
+                    .all(|&p| l.distance_to_point(p) <= tolerance);
+                let (a, b) = (along_edge(l.start), along_edge(l.end));
+                on_line.then_some((a.min(b) - tolerance, a.max(b) + tolerance, id.0))
+            }));
+            pieces.sort_by(|x, y| x.0.total_cmp(&y.0));
+            // Swept from the edge's start: covered while the pieces overlap.
+            let mut reach = 0.0;
+            for &(lo, hi, _) in &pieces {
+                if lo > reach {
+                    break;
+                }
+                reach = f64::max(reach, hi);
+            }
+            if reach < length {
+                continue;
+            }
+            let most = pieces
+                .iter()
+                .map(|&(lo, hi, id)| (hi.min(length) - lo.max(0.0), id))
+                .max_by(|x, y| x.0.total_cmp(&y.0).then(y.1.cmp(&x.1)));
+            if let Some((_, id)) = most {
+                e.origin = EdgeOrigin::Actual(id);
             }
         }
     }
@@ -231,6 +259,40 @@ mod tests {
         assert!(l.yc > 0.0 && l.yc < 0.02, "{}", l.yc);
         assert!(table.is_moved(EdgeOrigin::Actual(w)));
         assert!(!table.is_moved(EdgeOrigin::Actual(1)));
+    }
+
+    #[test]
+    fn a_frontier_on_a_wall_in_pieces_is_the_wall_and_one_across_a_doorway_is_not() {
+        // One straight wall held as two pieces end to end (0–4 m, 4–6 m),
+        // then a doorway, then the wall again (7–9 m).
+        let mut table = LineTable::default();
+        let first = table.add(wall(0.0, 4.0, 0.0));
+        let second = table.add(wall(4.0, 6.0, 0.0));
+        table.add(wall(7.0, 9.0, 0.0));
+        let virtual_edge = |x0: f64, x1: f64| RegionEdge {
+            start: [x0, 0.001],
+            end: [x1, 0.0015],
+            origin: EdgeOrigin::Virtual,
+        };
+        let mut contour = [
+            virtual_edge(1.0, 3.0),
+            virtual_edge(2.5, 4.5),
+            virtual_edge(3.5, 5.9),
+            virtual_edge(5.0, 8.0),
+            virtual_edge(6.2, 6.8),
+        ];
+        table.recover_walls(&mut contour, 0.02);
+        let origins: Vec<EdgeOrigin> = contour.iter().map(|e| e.origin).collect();
+        assert_eq!(
+            origins,
+            [
+                EdgeOrigin::Actual(first),
+                EdgeOrigin::Actual(first),
+                EdgeOrigin::Actual(second),
+                EdgeOrigin::Virtual,
+                EdgeOrigin::Virtual,
+            ]
+        );
     }
 
     #[test]
