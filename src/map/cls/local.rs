@@ -28,7 +28,12 @@
 //! clockwise about the sensor (free space on its left, as the extractor
 //! promises), it does not overlap the previous one in angle, and no range
 //! point in its wedge lies more than [`LocalMapConfig::point_tolerance`] on
-//! the sensor side of it; otherwise its wedge is treated as a gap.
+//! the sensor side of it; otherwise its wedge is treated as a gap. Two
+//! segments meeting at a corner may each have had their end put at the
+//! corner (see [`crate::geometry::WallEnds`]), the two estimates a few
+//! millimetres apart and crossing in angle: an overlap of less than one
+//! beam step is no occlusion, and the later segment starts where the
+//! earlier one's end beam meets it, joined to it along that beam.
 //!
 //! # Beams without a valid range
 //!
@@ -264,7 +269,7 @@ pub fn local_region(
     let mut accepted: Vec<(usize, Polar, Polar)> = Vec::new();
     for (i, line) in lines.iter().enumerate() {
         let l = line.transformed(&to_sensor);
-        let (s, e) = (
+        let (mut s, e) = (
             Polar {
                 angle: angle_of(l.start),
                 p: l.start,
@@ -274,9 +279,19 @@ pub fn local_region(
                 p: l.end,
             },
         );
+        if let Some((_, _, prev_end)) = accepted.last()
+            && s.angle <= prev_end.angle
+            && prev_end.angle - s.angle < step
+            && let Some(p) = beam_meets_line(prev_end.p, &l)
+        {
+            s = Polar {
+                angle: prev_end.angle,
+                p,
+            };
+        }
         let after_previous = accepted
             .last()
-            .is_none_or(|(_, _, prev_end)| s.angle > prev_end.angle);
+            .is_none_or(|(_, _, prev_end)| s.angle >= prev_end.angle && s.p != prev_end.p);
         let ok = [l.start, l.end, [l.xc, l.yc]]
             .iter()
             .flatten()
@@ -300,6 +315,9 @@ pub fn local_region(
     for &(i, s, e) in &accepted {
         if s.angle > cursor.angle {
             builder.envelope(cursor, s, &mut chain)?;
+        } else if s.p != cursor.p {
+            // A corner's two estimates, joined along the beam.
+            chain.push(cursor.p, s.p, LocalSource::Virtual);
         }
         chain.push(s.p, e.p, LocalSource::Actual(i));
         cursor = e;
@@ -314,6 +332,15 @@ pub fn local_region(
         return Err(LocalMapError::TooFewPoints(points.len()));
     }
     Ok(LocalRegion { edges: chain.edges }.transformed(&cfg.mount))
+}
+
+/// Where the beam through `p` (sensor frame) meets `line`'s infinite
+/// line, if it does ahead of the sensor.
+fn beam_meets_line(p: [f64; 2], line: &CogLine) -> Option<[f64; 2]> {
+    // The signed distance is affine along the beam t·p: f(t) = f0 + t·(f1 − f0).
+    let (f0, f1) = (line.signed_distance([0.0, 0.0]), line.signed_distance(p));
+    let t = f0 / (f0 - f1);
+    (t.is_finite() && t > 0.0).then(|| [t * p[0], t * p[1]])
 }
 
 struct Builder<'a> {
