@@ -236,7 +236,11 @@ impl LineExtractor {
                     start: start.map(|e| e.sigma),
                     end: end.map(|e| e.sigma),
                 };
-                out.push(line);
+                // A corner placed where a face meets the wall may lie a
+                // little before the last point on it.
+                if line.length() >= cfg.min_length {
+                    out.push(line);
+                }
             }
         }
     }
