@@ -45,6 +45,9 @@ pub enum HostOutput<'a> {
     SetBaud(Baud),
     /// Something the link reported.
     Event(Event),
+    /// Bytes from the sensor's line as they reached the host's tty (after
+    /// the line's noise), just before the link was handed them.
+    Received(&'a [u8]),
 }
 
 /// The line between a [`Link`] and an [`Emulator`] that live elsewhere: the
@@ -147,6 +150,7 @@ impl Wire {
     ) -> bool {
         self.flush(link, emulator, &mut on_output);
         if let Some(bytes) = emulator.poll_transmit(self.now) {
+            on_output(self.now, HostOutput::Received(&bytes));
             link.handle_input(&bytes, self.now);
             return true;
         }
@@ -178,6 +182,7 @@ impl Wire {
             if !self.settled
                 && let Some(bytes) = emulator.poll_transmit(self.now)
             {
+                on_output(self.now, HostOutput::Received(&bytes));
                 link.handle_input(&bytes, self.now);
                 continue;
             }

@@ -7,10 +7,10 @@
 
 use std::time::{Duration, Instant};
 
-use lms200::Baud;
-use lms200::emulator::{Emulator, EmulatorConfig, SentScan};
+use lms200::emulator::{Emulator, EmulatorConfig, FaultCounts, SentScan};
 use lms200::link::{Event, Link, LinkConfig, LinkError, TimedScan};
 use lms200::virtual_line::{HostOutput, Wire};
+use lms200::{Baud, Reply, Scan, crc16};
 
 /// Both peers and the line between them.
 pub struct Harness {
@@ -25,6 +25,8 @@ pub struct Harness {
     pub log: Vec<(Instant, Event)>,
     /// Every frame the link sent, with the time it was handed to the port.
     pub transmits: Vec<(Instant, Vec<u8>)>,
+    /// Every byte the host received, in order (line noise included).
+    pub received: Vec<u8>,
     /// Ignore `SetBaud`: the host tty stays at 9600 (a shell that forgot to
     /// change the line speed). Applied at every step.
     pub host_stuck_at_9600: bool,
@@ -47,6 +49,7 @@ impl Harness {
             wire,
             log: Vec::new(),
             transmits: Vec::new(),
+            received: Vec::new(),
             host_stuck_at_9600: false,
         }
     }
@@ -55,11 +58,11 @@ impl Harness {
     /// Returns false when neither side has anything left to do.
     pub fn step(&mut self) -> bool {
         self.wire.set_host_stuck_at_9600(self.host_stuck_at_9600);
-        let (log, transmits) = (&mut self.log, &mut self.transmits);
+        let (log, transmits, received) = (&mut self.log, &mut self.transmits, &mut self.received);
         let more = self
             .wire
             .step(&mut self.link, &mut self.emulator, |at, output| {
-                record(log, transmits, at, output)
+                record(log, transmits, received, at, output)
             });
         self.sync();
         more
@@ -67,10 +70,10 @@ impl Harness {
 
     fn drain_link_outputs(&mut self) {
         self.wire.set_host_stuck_at_9600(self.host_stuck_at_9600);
-        let (log, transmits) = (&mut self.log, &mut self.transmits);
+        let (log, transmits, received) = (&mut self.log, &mut self.transmits, &mut self.received);
         self.wire
             .flush(&mut self.link, &mut self.emulator, |at, output| {
-                record(log, transmits, at, output)
+                record(log, transmits, received, at, output)
             });
         self.sync();
     }
@@ -152,19 +155,36 @@ impl Harness {
     }
 
     /// Every scan the link delivered was sent by the emulator, unchanged and
-    /// in order.
+    /// in order, but for a damaged telegram whose 16-bit checksum matched by
+    /// chance (about one in 65,536 damaged telegrams; no receiver can tell
+    /// it from a good one). Such a scan must have been framed on the line as
+    /// the link read it, and there may be at most one per run: more means
+    /// the link put one together rather than the line.
     pub fn assert_scans_match_emulator(&self) {
         let sent: Vec<&SentScan> = self.emulator.sent_scans().collect();
         let mut cursor = 0;
+        let mut chance_matches = 0;
         for scan in self.scans() {
             let found = sent[cursor..]
                 .iter()
                 .position(|s| s.values == scan.scan.values && s.indices == scan.scan.indices);
-            let Some(offset) = found else {
-                panic!("the link delivered a scan the emulator never sent (after sent #{cursor})");
-            };
-            cursor += offset + 1;
+            match found {
+                Some(offset) => cursor += offset + 1,
+                None => {
+                    assert!(
+                        self.emulator.fault_counts() != FaultCounts::default()
+                            && framed_on_the_line(&self.received, &scan.scan),
+                        "the link delivered a scan the emulator never sent and the line never \
+                         carried (after sent #{cursor})"
+                    );
+                    chance_matches += 1;
+                }
+            }
         }
+        assert!(
+            chance_matches <= 1,
+            "{chance_matches} scans the emulator never sent passed their checksum"
+        );
     }
 
     /// Events without scans, for failure messages.
@@ -182,6 +202,7 @@ impl Harness {
 fn record(
     log: &mut Vec<(Instant, Event)>,
     transmits: &mut Vec<(Instant, Vec<u8>)>,
+    received: &mut Vec<u8>,
     at: Instant,
     output: HostOutput<'_>,
 ) {
@@ -189,5 +210,32 @@ fn record(
         HostOutput::Transmit(bytes) => transmits.push((at, bytes.to_vec())),
         HostOutput::SetBaud(_) => {}
         HostOutput::Event(event) => log.push((at, event)),
+        HostOutput::Received(bytes) => received.extend_from_slice(bytes),
     }
+}
+
+/// Whether `scan` was a telegram on the host's side of the line whose
+/// checksum matched: its code and data occur in `received` framed by an STX
+/// three bytes before and, after the status byte, the checksum of it all.
+fn framed_on_the_line(received: &[u8], scan: &Scan) -> bool {
+    let Ok(data) = Reply::ScanData(scan.clone()).data() else {
+        return false;
+    };
+    let body: Vec<u8> = [&[0xB0][..], &data].concat();
+    let end = |at: usize| at + body.len() + 1;
+    received
+        .windows(body.len())
+        .enumerate()
+        .filter(|(at, w)| *w == body.as_slice() && *at >= 4)
+        .any(|(at, _)| {
+            let start = at - 4;
+            let frame = received.get(start..end(at));
+            let crc = received.get(end(at)..end(at) + 2);
+            match (frame, crc) {
+                (Some(frame), Some(crc)) => {
+                    frame[0] == 0x02 && crc16(frame).to_le_bytes() == [crc[0], crc[1]]
+                }
+                _ => false,
+            }
+        })
 }

@@ -157,7 +157,13 @@ proptest::proptest! {
                     }
                 }
             }
-            proptest::prop_assert!((clipped.area() - whole.area()).abs() < 0.1, "{} vs {}", clipped.area(), whole.area());
+            // Collapsing an edge shorter than `min_edge` moves a vertex by
+            // up to that much, which tilts a whole wall of the unclipped
+            // map: a 5 mm step at the end of the hall's 42 m wall is
+            // 0.1 m². The two may differ by that along their boundary.
+            let perimeter: f64 = whole.segments().map(|s| s.length()).sum();
+            let tolerance = 0.05 + 0.5 * whole.config.region.min_edge * perimeter;
+            proptest::prop_assert!((clipped.area() - whole.area()).abs() < tolerance, "{} vs {}", clipped.area(), whole.area());
             proptest::prop_assert_eq!(clipped.shapes().len(), whole.shapes().len());
             let holes = |m: &ClsMap| m.shapes().iter().map(|s| s.holes.len()).sum::<usize>();
             proptest::prop_assert_eq!(holes(&clipped), holes(&whole));
