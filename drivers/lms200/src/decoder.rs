@@ -172,7 +172,7 @@ impl Decoder {
     /// interlaced streaming (`20 2A`, `30 08`), whose partial scans differ.
     pub fn set_expectation(&mut self, shape: Option<ScanShape>) {
         self.framer.shape = shape;
-        self.framer.searched_until = 0;
+        self.framer.forget_judgements();
     }
 
     /// The scan shape currently expected.
@@ -258,7 +258,35 @@ impl RequestDecoder {
 mod tests {
     use super::*;
     use crate::error::ParseError;
+    use crate::frame::STX;
     use crate::reply::ModeChangeResult;
+
+    /// Damaged bytes pushed one at a time: a request claiming more bytes
+    /// than arrive, a second one inside it, then short requests whose CRCs
+    /// fail. Each short one is checked once, not on every push (which costs
+    /// 35,312 CRCs here, growing with the square of the bytes).
+    #[test]
+    fn a_damaged_candidate_is_checked_once_however_its_bytes_arrive() {
+        let mut line = vec![STX, 0x00, 0x20, 0x03, 0x20, STX, 0x00, 0x10, 0x03, 0x20];
+        for i in 0..100u8 {
+            let body = [STX, 0x00, 0x01, 0x00, i];
+            let crc = crate::crc::crc16(&body) ^ 1;
+            line.extend(body);
+            line.extend(crc.to_le_bytes());
+        }
+        let mut decoder = RequestDecoder::new();
+        for byte in &line {
+            assert_eq!(decoder.push(std::slice::from_ref(byte)), 1);
+            while let Some(event) = decoder.poll() {
+                assert!(!matches!(event, RequestEvent::Request { .. }));
+            }
+        }
+        // At most once per STX (a CRC byte may be one too).
+        let candidates = line.iter().filter(|&&b| b == STX).count() as u64;
+        let checks = decoder.framer.crc_checks.get();
+        assert!((100..=candidates).contains(&checks), "{checks} CRCs");
+        assert_eq!(decoder.buffered(), line.len());
+    }
 
     fn mode_ok() -> Vec<u8> {
         Reply::ModeChanged(ModeChangeResult::Success)

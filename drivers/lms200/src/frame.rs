@@ -165,8 +165,9 @@ impl DecoderStats {
 pub(crate) enum Verdict<T> {
     /// A telegram of this many bytes, checked and parsed.
     Frame(T, usize),
-    /// Not enough bytes yet.
-    Incomplete,
+    /// Not enough bytes yet: judging it needs the buffer to reach this
+    /// index.
+    Incomplete(usize),
     /// The header alone rules it out: drop the STX.
     RejectHeader(DropReason),
     /// All its bytes arrived but it fails the CRC or content checks; the
@@ -190,10 +191,18 @@ pub(crate) struct Framer {
     pub(crate) start: usize,
     /// One past the last buffered byte.
     pub(crate) end: usize,
-    /// No STX between `start` and this index begins a complete valid
-    /// telegram (verdicts depend only on the bytes and the shape, so inner
-    /// searches never judge a position twice and stay linear).
-    pub(crate) searched_until: usize,
+    /// Every STX after `start` and before this index has been judged under
+    /// the current shape. A verdict on a complete candidate depends only on
+    /// its bytes and the shape, so only the ones still incomplete then
+    /// (`pending`) are judged again: each candidate's CRC is computed once,
+    /// however its bytes arrive.
+    pub(crate) scanned_until: usize,
+    /// Ascending positions of the STXs before `scanned_until` that were
+    /// incomplete when judged, each with the buffer end it waits for.
+    pub(crate) pending: Vec<(usize, usize)>,
+    /// No `pending` candidate can be judged before the buffer reaches this
+    /// index (a lower bound: stale entries may keep it low).
+    pub(crate) pending_ready_at: usize,
     /// Incomplete candidates starting before this index are abandoned.
     pub(crate) abandon_before: usize,
     /// `06`/`15` before this index lie inside a failed telegram: data, not
@@ -201,6 +210,9 @@ pub(crate) struct Framer {
     pub(crate) suppress_control_before: usize,
     pub(crate) shape: Option<ScanShape>,
     pub(crate) stats: DecoderStats,
+    /// CRCs computed, so tests can show each candidate is checked once.
+    #[cfg(test)]
+    pub(crate) crc_checks: std::cell::Cell<u64>,
 }
 
 impl Framer {
@@ -210,11 +222,15 @@ impl Framer {
             buffer: vec![0; BUFFER_CAPACITY].into_boxed_slice(),
             start: 0,
             end: 0,
-            searched_until: 0,
+            scanned_until: 0,
+            pending: Vec::new(),
+            pending_ready_at: usize::MAX,
             abandon_before: 0,
             suppress_control_before: 0,
             shape: None,
             stats: DecoderStats::default(),
+            #[cfg(test)]
+            crc_checks: std::cell::Cell::new(0),
         }
     }
 
@@ -226,7 +242,7 @@ impl Framer {
         if self.start == self.end {
             self.start = 0;
             self.end = 0;
-            self.searched_until = 0;
+            self.forget_judgements();
             self.abandon_before = 0;
             self.suppress_control_before = 0;
         } else if bytes.len() > self.buffer.len() - self.end && self.start > 0 {
@@ -247,7 +263,21 @@ impl Framer {
         self.start = 0;
         self.abandon_before = self.abandon_before.saturating_sub(shift);
         self.suppress_control_before = self.suppress_control_before.saturating_sub(shift);
-        self.searched_until = self.searched_until.saturating_sub(shift);
+        self.scanned_until = self.scanned_until.saturating_sub(shift);
+        self.pending.retain(|&(at, _)| at > shift);
+        for (at, needed) in &mut self.pending {
+            *at -= shift;
+            *needed -= shift;
+        }
+        self.pending_ready_at = self.pending_ready_at.saturating_sub(shift);
+    }
+
+    /// Forgets every verdict: the bytes or the shape they were made on
+    /// changed.
+    pub(crate) fn forget_judgements(&mut self) {
+        self.scanned_until = 0;
+        self.pending.clear();
+        self.pending_ready_at = usize::MAX;
     }
 
     /// Drops every buffered byte, counted as one truncated telegram.
@@ -258,7 +288,7 @@ impl Framer {
         }
         self.start = 0;
         self.end = 0;
-        self.searched_until = 0;
+        self.forget_judgements();
         self.abandon_before = 0;
         self.suppress_control_before = 0;
     }
@@ -275,7 +305,7 @@ impl Framer {
     ) -> Verdict<T> {
         let candidate = &self.buffer[at..self.end];
         let Some(&address) = candidate.get(1) else {
-            return Verdict::Incomplete;
+            return Verdict::Incomplete(at + 2);
         };
         if !self.direction.address_plausible(address) {
             return Verdict::RejectHeader(DropReason::Implausible(Implausibility::Address(
@@ -283,7 +313,7 @@ impl Framer {
             )));
         }
         let Some(&[len_lo, len_hi]) = candidate.get(2..HEADER_LEN) else {
-            return Verdict::Incomplete;
+            return Verdict::Incomplete(at + HEADER_LEN);
         };
         let len = u16::from_le_bytes([len_lo, len_hi]);
         if len < self.direction.min_len_field() || len > MAX_LEN_FIELD {
@@ -291,7 +321,7 @@ impl Framer {
         }
         if let Some(shape) = &self.shape {
             let Some(&code) = candidate.get(HEADER_LEN) else {
-                return Verdict::Incomplete;
+                return Verdict::Incomplete(at + HEADER_LEN + 1);
             };
             if code == SCAN_CODE && len != shape.len_field() {
                 return Verdict::RejectHeader(DropReason::LengthMismatch {
@@ -302,9 +332,11 @@ impl Framer {
         }
         let total = frame_len(len);
         let Some(frame) = candidate.get(..total) else {
-            return Verdict::Incomplete;
+            return Verdict::Incomplete(at + total);
         };
         let (covered, crc) = frame.split_at(total - CRC_LEN);
+        #[cfg(test)]
+        self.crc_checks.set(self.crc_checks.get() + 1);
         if crc16(covered) != u16::from_le_bytes([crc[0], crc[1]]) {
             return Verdict::RejectFrame(DropReason::BadCrc, total);
         }
@@ -322,21 +354,76 @@ impl Framer {
         validate: &impl Fn(&[u8], Option<&ScanShape>) -> Result<T, DropReason>,
     ) -> Option<usize> {
         let limit = limit.min(self.end);
-        let mut position = self.searched_until.max(self.start + 1).min(limit);
-        let mut first_incomplete = None;
-        while let Some(offset) = memchr::memchr(STX, &self.buffer[position..limit]) {
+        let first = self.start + 1;
+        // Candidates once incomplete lie before the unscanned bytes: first.
+        if self.end >= self.pending_ready_at
+            && let Some(found) = self.judge_pending(first, limit, validate)
+        {
+            return Some(found);
+        }
+        let mut position = self.scanned_until.max(first);
+        while position < limit {
+            let Some(offset) = memchr::memchr(STX, &self.buffer[position..limit]) else {
+                break;
+            };
             let at = position + offset;
             match self.judge(at, validate) {
-                Verdict::Frame(..) => return Some(at),
-                Verdict::Incomplete => {
-                    first_incomplete.get_or_insert(at);
+                Verdict::Frame(..) => {
+                    self.scanned_until = at;
+                    return Some(at);
+                }
+                Verdict::Incomplete(needed) => {
+                    self.pending.push((at, needed));
+                    self.pending_ready_at = self.pending_ready_at.min(needed);
                 }
                 Verdict::RejectHeader(_) | Verdict::RejectFrame(..) => {}
             }
             position = at + 1;
         }
-        self.searched_until = self.searched_until.max(first_incomplete.unwrap_or(limit));
+        self.scanned_until = self.scanned_until.max(limit);
         None
+    }
+
+    /// Judges again the pending candidates from `first` up to `limit` whose
+    /// bytes arrived; drops the ones now rejected and those before `first`;
+    /// returns the first that is a valid telegram.
+    fn judge_pending<T>(
+        &mut self,
+        first: usize,
+        limit: usize,
+        validate: &impl Fn(&[u8], Option<&ScanShape>) -> Result<T, DropReason>,
+    ) -> Option<usize> {
+        let mut kept = 0;
+        let mut found = None;
+        let mut ready_at = usize::MAX;
+        for index in 0..self.pending.len() {
+            let (at, needed) = self.pending[index];
+            let keep = if at < first {
+                false
+            } else if found.is_some() || at >= limit || needed > self.end {
+                true
+            } else {
+                match self.judge(at, validate) {
+                    Verdict::Frame(..) => {
+                        found = Some(at);
+                        true
+                    }
+                    Verdict::Incomplete(needed) => {
+                        self.pending[index].1 = needed;
+                        true
+                    }
+                    Verdict::RejectHeader(_) | Verdict::RejectFrame(..) => false,
+                }
+            };
+            if keep {
+                self.pending[kept] = self.pending[index];
+                ready_at = ready_at.min(self.pending[kept].1);
+                kept += 1;
+            }
+        }
+        self.pending.truncate(kept);
+        self.pending_ready_at = ready_at;
+        found
     }
 
     /// Drops the bytes from `start` up to the telegram found at `inner`,
@@ -374,10 +461,10 @@ impl Framer {
                     Some(FramerEvent::Frame(item))
                 }
                 Verdict::RejectHeader(reason) => self.drop_bytes(reason, 1),
-                Verdict::Incomplete if self.start < self.abandon_before => {
+                Verdict::Incomplete(_) if self.start < self.abandon_before => {
                     self.drop_bytes(DropReason::Truncated, 1)
                 }
-                Verdict::Incomplete => {
+                Verdict::Incomplete(_) => {
                     let inner = self.find_inner_telegram(self.end, &validate)?;
                     self.cut_before(inner)
                 }
