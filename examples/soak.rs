@@ -47,8 +47,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "virtual s | wall s | scans | keyframes (kept) | loop closures | walls | frontiers | RSS MiB | peak MiB"
     );
     let mut report_at = 0.0;
-    let mut checkpoint_at = config.daemon.checkpoint_interval;
     let dir = std::env::temp_dir().join(format!("clsmap-soak-{}", std::process::id()));
+    robot.checkpoint_into(&dir);
     let mut rng = Rng::new(11);
     let mut route: Option<PathFollower> = None;
     let radius = config.exploration.planner.clearance();
@@ -71,10 +71,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 peak as f64 / 1024.0
             );
             report_at += 600.0;
-        }
-        if robot.now() >= checkpoint_at {
-            robot.checkpoint(&dir)?;
-            checkpoint_at += config.daemon.checkpoint_interval;
         }
         if !robot.live().exploration_complete() {
             robot.tick();
@@ -136,8 +132,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         peak as f64 / 1024.0
     );
     let loops = robot.live().mapper().summary().loops;
+    let status = robot.live().status();
     println!(
-        "loop closure: {} loops, {} revisits merged, {} optimisations in {:.2} s, rebuilds {:.2} s, search {:.2} s",
+        "keyframes: {} taken, {} kept; loop closure: {} loops, {} revisits merged, {} optimisations in {:.2} s, rebuilds {:.2} s, search {:.2} s",
+        status.keyframes,
+        status.graph_keyframes,
         loops.accepted,
         loops.revisits_merged,
         loops.optimisations,
@@ -145,7 +144,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         loops.rebuild_s,
         loops.search_s
     );
-    robot.checkpoint(&dir)?;
-    println!("checkpoints in {}", dir.display());
+    let saving = std::time::Instant::now();
+    robot.save(&dir)?;
+    let trajectory = std::fs::metadata(dir.join("trajectory.tum"))?.len();
+    println!(
+        "last save {:.2} s ({} trajectory rewrites in the corrected frame, trajectory.tum {:.1} MB); \
+         checkpoints in {}",
+        saving.elapsed().as_secs_f64(),
+        robot.live().mapper().reframes(),
+        trajectory as f64 / 1e6,
+        dir.display()
+    );
+    if !robot.stats().checkpoint_errors.is_empty() {
+        return Err(format!("checkpoints failed: {:?}", robot.stats().checkpoint_errors).into());
+    }
     Ok(())
 }

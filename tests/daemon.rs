@@ -277,3 +277,129 @@ fn a_run_goes_on_from_a_saved_map() {
     assert!(VirtualRobot::new(&bad).is_ok());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Checkpoints every 5 s while the robot drives twice round a 68 m loop
+/// (a 2 m corridor round a 20 m × 14 m block, boxes along the outer
+/// walls; 2 % odometry scale error, 0.01 rad/m heading drift) and loops
+/// close: the trajectory file ends in the corrected frame whole, byte for
+/// byte what a run holding every pose until its end writes, instead of
+/// keeping the poses written before each closure where they were.
+#[test]
+fn poses_written_before_a_loop_closure_move_with_it() {
+    let base = std::env::temp_dir().join(format!("clsmap-reframe-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&base);
+    let mut config = demo_config().unwrap();
+    let world = base.join("long-loop.world");
+    std::fs::create_dir_all(&base).unwrap();
+    std::fs::write(
+        &world,
+        "start 1 1 0\n\
+         polyline closed 0 0  24 0  24 18  0 18\n\
+         polyline closed 2 2  2 16  22 16  22 2\n\
+         box 6 0.25  0.4 0.25  0\nbox 15 0.2  0.8 0.2  0\nbox 23.75 7  0.25 0.6  0\n\
+         box 23.8 13  0.2 0.3  0\nbox 18 17.75  0.5 0.25  0\nbox 9 17.8  1 0.2  0\n\
+         box 0.25 12  0.25 0.4  0\nbox 0.2 5  0.2 0.7  0\n",
+    )
+    .unwrap();
+    config.sim.world = world.display().to_string();
+    config.exploration.enabled = false;
+    config.daemon.checkpoint_interval = 5.0;
+    let tum = |dir: &std::path::Path| std::fs::read_to_string(dir.join("trajectory.tum")).unwrap();
+    // The corridor's centre line (map frame: the start, (1, 1) in the
+    // world, facing +x), twice; the heading is held, the base holonomic.
+    let corners = [(22.0, 0.0), (22.0, 16.0), (0.0, 16.0), (0.0, 0.0)];
+    let route: Vec<(f64, f64)> = corners.iter().chain(&corners).copied().collect();
+    let run = |dir: &std::path::Path, periodic: bool| {
+        let mut robot = VirtualRobot::new(&config).unwrap();
+        if periodic {
+            robot.checkpoint_into(dir);
+        }
+        // The trajectory file as it was before the first loop closed.
+        let mut before_closure = None;
+        // The true pose (world frame) at each tick: the robot keeps only
+        // the last few seconds.
+        let mut truth = Vec::new();
+        let mut next = 0;
+        while next < route.len() && robot.now() < 900.0 {
+            if periodic && robot.live().mapper().reframes() == 0 {
+                before_closure = std::fs::read_to_string(dir.join("trajectory.tum")).ok();
+            }
+            robot.tick_with(|live, _| {
+                let pose = live.pose_now()?;
+                let (gx, gy) = route[next];
+                let (dx, dy) = (gx - pose.x, gy - pose.y);
+                let d = dx.hypot(dy);
+                if d < 0.15 {
+                    next += 1;
+                }
+                let speed = 0.5 * (d / 0.5).min(1.0) / d.max(1e-9);
+                let (s, c) = pose.theta.sin_cos();
+                Some(clsmap_base::Twist {
+                    vx: speed * (c * dx + s * dy),
+                    vy: speed * (c * dy - s * dx),
+                    omega: -pose.theta,
+                })
+            });
+            truth.push((robot.now(), robot.robot().true_pose_at(robot.now())));
+        }
+        assert_eq!(
+            next,
+            route.len(),
+            "the route was not driven in {:.0} s",
+            robot.now()
+        );
+        assert!(
+            robot.stats().checkpoint_errors.is_empty(),
+            "{:?}",
+            robot.stats()
+        );
+        robot.save(dir).unwrap();
+        (robot, before_closure, truth)
+    };
+    let (periodic, before, truth) = run(&base.join("periodic"), true);
+    let (held, _, _) = run(&base.join("held"), false);
+    let reframes = periodic.live().mapper().reframes();
+    println!(
+        "{reframes} reframes, {:?}",
+        periodic.live().mapper().keyframe_graph().stats()
+    );
+    assert!(reframes > 0, "no loop closure moved the map");
+    assert_eq!(reframes, held.live().mapper().reframes());
+    let (periodic_tum, held_tum) = (tum(&base.join("periodic")), tum(&base.join("held")));
+    let before = before.expect("a checkpoint came before the first loop closed");
+    let written = before.lines().count();
+    assert!(written > 100, "{written} lines before the closure");
+    let moved = before
+        .lines()
+        .zip(periodic_tum.lines())
+        .filter(|(a, b)| a != b)
+        .count();
+    // Scored against the truth as the run's own score is, in the map frame.
+    let origin = periodic.map_origin().unwrap();
+    let poses = clsmap::files::trajectory::read_tum(periodic_tum.as_bytes()).unwrap();
+    let file_error = poses
+        .iter()
+        .map(|(t, p)| {
+            let i = truth
+                .partition_point(|(tt, _)| tt < t)
+                .clamp(1, truth.len() - 1);
+            let ((t0, a), (t1, b)) = (truth[i - 1], truth[i]);
+            let f = ((t - t0) / (t1 - t0)).clamp(0.0, 1.0);
+            let at =
+                clsmap::geometry::Pose2::new(a.x + f * (b.x - a.x), a.y + f * (b.y - a.y), a.theta);
+            let truth = origin.between(&at);
+            (p.x - truth.x).hypot(p.y - truth.y)
+        })
+        .sum::<f64>()
+        / poses.len() as f64;
+    println!(
+        "{moved} of the {written} lines written before the first closure moved; mean error \
+         of the file {file_error:.4} m, of the poses as estimated live {:.4} m",
+        periodic.stats().mean_error
+    );
+    assert!(moved * 2 > written, "{moved} of {written} moved");
+    assert_eq!(periodic_tum, held_tum);
+    assert_eq!(poses.len(), periodic_tum.lines().count() - 1);
+    assert!(file_error < periodic.stats().mean_error, "{file_error}");
+    std::fs::remove_dir_all(&base).unwrap();
+}

@@ -5,6 +5,7 @@
 
 #![allow(clippy::unwrap_used)]
 
+use clsmap::files::trajectory::AnchoredPose;
 use clsmap::geometry::{Pose2, wrap_angle};
 use clsmap::input::ScanRecord;
 use clsmap::pipeline::config::MapperConfig;
@@ -24,7 +25,7 @@ fn map_tour(
     config: MapperConfig,
     rng: &mut Rng,
 ) -> (Mapper, f64, f64) {
-    let (mapper, rmse, worst, _) = map_tour_with(world, truth, odo, config, rng, None);
+    let (mapper, rmse, worst, _) = map_tour_with(world, truth, odo, config, rng, None, None);
     (mapper, rmse, worst)
 }
 
@@ -32,6 +33,9 @@ fn map_tour(
 /// whose results come back that many scans after they were taken, as
 /// the daemon's blocking thread gives them back while scans go on, and
 /// loop searches as jobs whose results come back after the next scan.
+/// With `handed_over`, the poses the mapper would hand to a checkpoint
+/// are taken after every scan, while a search is in flight (the RMSE is
+/// then of the poses left).
 fn map_tour_with(
     world: &World,
     truth: &[Pose2],
@@ -39,6 +43,7 @@ fn map_tour_with(
     config: MapperConfig,
     rng: &mut Rng,
     latency: Option<usize>,
+    mut handed_over: Option<&mut Vec<AnchoredPose>>,
 ) -> (Mapper, f64, f64, usize) {
     let spec = ScanSpec::lms200_half_degree(0.01);
     let mut mapper = Mapper::new(config);
@@ -59,6 +64,9 @@ fn map_tour_with(
             }
             if searching.is_none() {
                 searching = mapper.take_loop_search().map(|job| (k, job));
+            }
+            if let Some(taken) = handed_over.as_deref_mut() {
+                taken.extend(mapper.take_settled_trajectory());
             }
             if in_flight
                 .as_ref()
@@ -206,8 +214,15 @@ fn optimisations_run_in_the_background_end_as_well_as_at_once() {
     let odo = drifting_odometry(&truth, 1.05, 0.04, &mut Rng::new(11));
     let config = MapperConfig::default();
     let (at_once, rmse_at_once, _) = map_tour(&world, &truth, &odo, config, &mut Rng::new(4));
-    let (background, rmse_background, heading, applied) =
-        map_tour_with(&world, &truth, &odo, config, &mut Rng::new(4), Some(10));
+    let (background, rmse_background, heading, applied) = map_tour_with(
+        &world,
+        &truth,
+        &odo,
+        config,
+        &mut Rng::new(4),
+        Some(10),
+        None,
+    );
     assert!(applied > 0, "no result came back while scans went on");
     let (a, b) = (
         at_once.keyframe_graph().stats(),
@@ -229,6 +244,54 @@ fn optimisations_run_in_the_background_end_as_well_as_at_once() {
     );
     assert!(heading < 0.05, "{heading}");
     background.cls_map().check_invariants().unwrap();
+}
+
+/// Poses handed over to checkpoints while mapping goes on (here after
+/// every scan, with a loop search in flight that may merge the newest
+/// keyframe into an older one) keep keyframes that stay: put in the map
+/// frame with the final keyframe poses, they are the poses a run that
+/// handed none over ends with.
+#[test]
+fn poses_handed_over_while_searches_run_keep_their_keyframes() {
+    let world = World::long_loop();
+    let truth = tour(&CORNERS, 2, 0.2);
+    let odo = drifting_odometry(&truth, 1.02, 0.01, &mut Rng::new(11));
+    let config = MapperConfig::default();
+    let (held, ..) = map_tour_with(
+        &world,
+        &truth,
+        &odo,
+        config,
+        &mut Rng::new(4),
+        Some(10),
+        None,
+    );
+    let mut taken = Vec::new();
+    let (mut handing, ..) = map_tour_with(
+        &world,
+        &truth,
+        &odo,
+        config,
+        &mut Rng::new(4),
+        Some(10),
+        Some(&mut taken),
+    );
+    taken.extend(handing.take_trajectory());
+    let merged = handing.keyframe_graph().stats().revisits_merged;
+    assert!(merged > 40, "{merged} revisits merged");
+    let keyframes = handing.keyframe_graph().poses();
+    assert_eq!(keyframes, held.keyframe_graph().poses());
+    assert_eq!(taken.len(), held.trajectory().len());
+    let worst = taken
+        .iter()
+        .zip(held.trajectory())
+        .map(|(a, (t, p))| {
+            assert_eq!(a.t, *t);
+            let q = a.in_map(keyframes).unwrap();
+            (q.x - p.x).hypot(q.y - p.y)
+        })
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-9, "{worst} m apart");
 }
 
 /// `map.json` holds what the map is made of: written after two laps with

@@ -119,7 +119,7 @@ pub fn demo(
         );
     }
     println!(
-        "wrote {}/{{map.json, map.svg, trajectory.tum, demo.json}}",
+        "wrote {}/{{map.json, map.svg, trajectory.tum, trajectory.anchors, demo.json}}",
         s.out_dir.display()
     );
     // Stopped by Ctrl-C is what the user asked for; stopped by the time

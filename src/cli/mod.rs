@@ -42,7 +42,8 @@ enum Command {
     /// Virtual Line Segment Pursuit until no frontier is left, then writes
     /// the map, its picture and the trajectory.
     Demo {
-        /// Where to write map.json, map.svg, trajectory.tum, demo.json; it
+        /// Where to write map.json, map.svg, trajectory.tum (and its
+        /// trajectory.anchors), demo.json; it
         /// must not hold a map already. Default: out/demo, or out/demo-2,
         /// out/demo-3 … when earlier runs are there (none is overwritten).
         #[arg(long)]

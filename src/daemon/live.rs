@@ -17,7 +17,7 @@ use tracing::{info, info_span, warn};
 use super::checkpoint::{Checkpoint, CheckpointFailed};
 use super::latency::{Latencies, Stage};
 use crate::explore::{DriveConfig, ExplorationConfig, Explorer, ExplorerEvent, ExplorerStats};
-use crate::files::trajectory::StampedPose;
+use crate::files::trajectory::AnchoredPose;
 use crate::geometry::{Pose2, RangeScan};
 use crate::input::ScanRecord;
 use crate::input::odometry::OdometryTrack;
@@ -69,7 +69,11 @@ pub struct LiveMapper {
     last_fix: Option<(f64, Pose2, Option<Pose2>)>,
     /// Poses taken from the mapper and not yet appended to a trajectory
     /// file (kept when an append fails, so none is lost).
-    unwritten: Vec<StampedPose>,
+    unwritten: Vec<AnchoredPose>,
+    /// The mapper's [`reframes`](Mapper::reframes) when the trajectory
+    /// files were last snapshotted; none after a failed write, so the next
+    /// one rebuilds the TUM file whatever happened.
+    reframes_written: Option<u64>,
     /// The path drawn on the map's picture: poses at least
     /// [`PICTURE_STEP`] apart, the newest [`PICTURE_POSES`] of them.
     picture_path: VecDeque<Pose2>,
@@ -120,6 +124,7 @@ impl LiveMapper {
             localized: 0,
             last_fix: None,
             unwritten: Vec::new(),
+            reframes_written: Some(0),
             picture_path: VecDeque::new(),
         }
     }
@@ -387,19 +392,26 @@ impl LiveMapper {
 
     /// A snapshot for a checkpoint into `dir`: the poses since the last
     /// one (the mapper forgets them, so memory stays bounded however long
-    /// the daemon runs), the maps and the picture's path. Localizing in a
+    /// the daemon runs; the newest few wait while their keyframe may still
+    /// be merged away), the maps and the picture's path. Localizing in a
     /// loaded map, which does not change, it holds the poses only.
     pub fn begin_checkpoint(&mut self, dir: &Path) -> Checkpoint {
         let with_map = self.mapper.map_mode() != Some(MapMode::Localize);
-        self.snapshot(dir, with_map)
+        let poses = self.mapper.take_settled_trajectory();
+        self.snapshot(dir, poses, with_map)
     }
 
-    fn snapshot(&mut self, dir: &Path, with_map: bool) -> Checkpoint {
+    fn snapshot(&mut self, dir: &Path, poses: Vec<AnchoredPose>, with_map: bool) -> Checkpoint {
         let mut trajectory = std::mem::take(&mut self.unwritten);
-        trajectory.extend(self.mapper.take_trajectory());
+        trajectory.extend(poses);
+        let reframes = self.mapper.reframes();
+        let reframed = self.reframes_written != Some(reframes);
+        self.reframes_written = Some(reframes);
         Checkpoint {
             dir: dir.to_owned(),
             trajectory,
+            keyframe_poses: self.mapper.keyframe_graph().poses().to_vec(),
+            reframed,
             map: with_map.then(|| self.mapper.contents()),
             path: self.picture_path.iter().copied().collect(),
         }
@@ -411,6 +423,7 @@ impl LiveMapper {
         let mut poses = failed.trajectory;
         poses.append(&mut self.unwritten);
         self.unwritten = poses;
+        self.reframes_written = None;
         failed.error
     }
 
@@ -419,7 +432,8 @@ impl LiveMapper {
     /// with; see [`Checkpoint::write`]).
     pub fn checkpoint(&mut self, dir: &Path) -> Result<(), PipelineError> {
         let _span = info_span!("checkpoint").entered();
-        self.snapshot(dir, true)
+        let poses = self.mapper.take_trajectory();
+        self.snapshot(dir, poses, true)
             .write()
             .map_err(|failed| self.checkpoint_failed(failed))
     }

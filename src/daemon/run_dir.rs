@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use tracing::{error, info};
 
+use super::checkpoint::ANCHORED_TRAJECTORY_FILE;
 use super::core::Core;
 use super::runtime::DaemonError;
 use crate::error_chain;
@@ -110,7 +111,7 @@ impl RunDirs {
         {
             parents.push(up.to_path_buf());
         }
-        let earlier = self.out_dir.as_ref().map(|d| d.join(TRAJECTORY_FILE));
+        let earlier = self.out_dir.clone();
         for parent in parents {
             let rescue = match new_dir(&parent, "rescue") {
                 Ok(dir) => dir,
@@ -121,12 +122,11 @@ impl RunDirs {
             };
             // The rescue is whole: the poses the run's directory holds
             // already come first, then the ones not written yet.
-            let copied = match &earlier {
-                Some(path) if path.is_file() => {
-                    std::fs::copy(path, rescue.join(TRAJECTORY_FILE)).map(|_| ())
-                }
-                _ => Ok(()),
-            };
+            let copied = [TRAJECTORY_FILE, ANCHORED_TRAJECTORY_FILE]
+                .iter()
+                .filter_map(|name| Some((earlier.as_ref()?.join(name), rescue.join(name))))
+                .filter(|(from, _)| from.is_file())
+                .try_for_each(|(from, to)| std::fs::copy(from, to).map(|_| ()));
             match copied
                 .map_err(|e| e.to_string())
                 .and_then(|()| core.checkpoint(&rescue).map_err(|e| error_chain(&e)))

@@ -100,6 +100,8 @@ pub struct VirtualStats {
     pub driven: f64,
     /// Link events other than scans (connects, silences, errors).
     pub link_events: Vec<String>,
+    /// Checkpoints due that could not be written.
+    pub checkpoint_errors: Vec<String>,
 }
 
 /// The daemon's loop on a virtual clock; see the module doc.
@@ -117,6 +119,8 @@ pub struct VirtualRobot {
     last_truth: Option<Pose2>,
     error_sum: f64,
     stats: VirtualStats,
+    /// Where checkpoints are written when due, if anywhere.
+    checkpoint_dir: Option<std::path::PathBuf>,
 }
 
 impl std::fmt::Debug for VirtualRobot {
@@ -165,6 +169,7 @@ impl VirtualRobot {
             last_truth: None,
             error_sum: 0.0,
             stats: VirtualStats::default(),
+            checkpoint_dir: None,
         })
     }
 
@@ -257,11 +262,32 @@ impl VirtualRobot {
         }
         let manual = drive(self.core.live(), self.now);
         self.core.handle_tick(self.now, manual);
-        // Nothing here to tell (systemd) or to write (checkpoints are
-        // written when asked for, by `checkpoint`).
+        // Nothing here to tell (systemd); checkpoints are written when due
+        // if a directory was given, on this thread (the daemon writes them
+        // on a blocking one while the loop goes on).
         self.core.poll_ready();
         self.core.poll_status();
-        self.core.poll_checkpoint();
+        if self.core.poll_checkpoint()
+            && let Some(dir) = &self.checkpoint_dir
+        {
+            let written = self.core.begin_checkpoint(dir).write();
+            if let Err(e) = self.core.handle_checkpoint_done(written) {
+                self.stats.checkpoint_errors.push(e.to_string());
+            }
+        }
+    }
+
+    /// The end of a run, as the daemon's stop does it: the last
+    /// optimisation and rebuild, then the last save into `dir`.
+    pub fn save(&mut self, dir: &Path) -> Result<(), crate::pipeline::PipelineError> {
+        self.core.finish();
+        self.core.checkpoint(dir)
+    }
+
+    /// Writes a checkpoint into `dir` whenever one is due
+    /// (`checkpoint_interval`), as the daemon does.
+    pub fn checkpoint_into(&mut self, dir: &Path) {
+        self.checkpoint_dir = Some(dir.to_owned());
     }
 
     fn score(&mut self, t: f64, estimate: Pose2) {

@@ -13,7 +13,7 @@ use super::rejection::{Rejection, RejectionKind};
 use super::start::{HINT_COVARIANCE, MapMode, StartSearch};
 use super::summary::{LastScanTimes, MappingSummary, StageClocks};
 use super::{MapSearch, PipelineError, ScanOutcome};
-use crate::files::trajectory::StampedPose;
+use crate::files::trajectory::{AnchoredPose, StampedPose};
 use crate::geometry::{CogLine, LineExtractor, Pose2, SegmentIndex, wrap_angle};
 use crate::graph::{
     AppliedOptimisation, Correction, KeyframeGraph, LoopSearchJob, LoopSearchResult,
@@ -90,6 +90,8 @@ pub struct Mapper {
     hinted: bool,
     /// The last scan's pose covariance (x, y, θ; m², m·rad, rad²).
     last_covariance: [[f64; 3]; 3],
+    /// Loop closures that moved the keyframes so far.
+    reframes: u64,
     pub(super) summary: MappingSummary,
     clocks: StageClocks,
 }
@@ -130,6 +132,7 @@ impl Mapper {
             relocalizer: None,
             hinted: false,
             last_covariance: [[0.0; 3]; 3],
+            reframes: 0,
             summary: MappingSummary::default(),
             clocks: StageClocks::default(),
         }
@@ -280,6 +283,12 @@ impl Mapper {
         }
     }
 
+    /// How many times loop closures moved the keyframes (and the poses
+    /// anchored to them) so far.
+    pub fn reframes(&self) -> u64 {
+        self.reframes
+    }
+
     /// One pose per scan processed so far (s, map frame).
     pub fn trajectory(&self) -> &[StampedPose] {
         &self.trajectory
@@ -345,13 +354,52 @@ impl Mapper {
         self.predictor.forget_odometry();
     }
 
-    /// Hands over the poses recorded so far and forgets them, so a mapper
-    /// that runs for days keeps its memory bounded (the daemon appends
-    /// them to its trajectory file at each checkpoint). Poses handed over
-    /// are not moved by later loop closures.
-    pub fn take_trajectory(&mut self) -> Vec<StampedPose> {
-        self.anchors.clear();
-        std::mem::take(&mut self.trajectory)
+    /// Hands over the poses recorded so far, anchored to their keyframes,
+    /// and forgets them, so a mapper that runs for days keeps its memory
+    /// bounded (the daemon appends them to its trajectory files at each
+    /// checkpoint, and rebuilds the TUM file from the anchors when a loop
+    /// closure moves the keyframes). The end of a run takes them all.
+    pub fn take_trajectory(&mut self) -> Vec<AnchoredPose> {
+        self.take_trajectory_before(self.trajectory.len())
+    }
+
+    /// [`take_trajectory`](Self::take_trajectory) while mapping goes on:
+    /// the poses anchored to the newest keyframe stay (with those after
+    /// them) while its loop search may still merge it into an older one,
+    /// since its index then goes to the next keyframe kept.
+    pub fn take_settled_trajectory(&mut self) -> Vec<AnchoredPose> {
+        let newest = self.graph.len().checked_sub(1);
+        let settled = match newest {
+            Some(newest) if self.graph.loop_search_pending() => self
+                .anchors
+                .iter()
+                .position(|a| a.is_some_and(|(k, _)| k == newest))
+                .unwrap_or(self.anchors.len()),
+            _ => self.trajectory.len(),
+        };
+        self.take_trajectory_before(settled)
+    }
+
+    /// The first `end` poses (the two lists grow together, one entry per
+    /// scan).
+    fn take_trajectory_before(&mut self, end: usize) -> Vec<AnchoredPose> {
+        let end = end.min(self.trajectory.len()).min(self.anchors.len());
+        self.trajectory
+            .drain(..end)
+            .zip(self.anchors.drain(..end))
+            .map(|((t, pose), anchor)| match anchor {
+                Some((k, relative)) => AnchoredPose {
+                    t,
+                    keyframe: Some(k),
+                    pose: relative,
+                },
+                None => AnchoredPose {
+                    t,
+                    keyframe: None,
+                    pose,
+                },
+            })
+            .collect()
     }
 
     /// How long each stage took in the last scan processed.
@@ -430,6 +478,7 @@ impl Mapper {
     /// The predictor, the keyframe policy and the trajectory follow the
     /// keyframes to their corrected poses.
     fn follow_correction(&mut self, c: &Correction) {
+        self.reframes += 1;
         let poses = self.graph.poses();
         self.predictor.reframe(&c.correction);
         self.keyframes.reframe(&c.correction);
