@@ -146,11 +146,21 @@ pub struct MapSection {
     /// look-alike places apart; 0 = it stands still. Default 0.3.
     pub turn_rate: f64,
     /// Longest time (s) one search runs with scans coming in (not paused)
-    /// while the base turns for it; then it stops and waits (status LOST)
-    /// until a scan or a pose hint settles it. With `turn_rate = 0` the
+    /// while the base turns for it; then it drives (`drive_for`), stops
+    /// and waits (status LOST) until a scan or a pose hint settles it. With `turn_rate = 0` the
     /// base stands still and the status turns LOST after this long; with 0
     /// here it never turns. Default 30 (a turn and a half at 0.3 rad/s).
     pub turn_for: f64,
+    /// After `turn_for`, a search still unsettled (two stretches of a
+    /// corridor that look the same within the sensor's reach) drives this
+    /// far (m) at most, heading held, along the most open way its scan
+    /// shows ahead (legs of at least 1 m, stopped 0.3 m short of what is
+    /// in the way), so the scans reach what tells the places apart; then
+    /// the base stops and the status says LOST. 0 = it never drives.
+    /// Default 4.
+    pub drive_for: f64,
+    /// Speed (m/s) of that drive, at most `[base] max_speed`. Default 0.2.
+    pub drive_speed: f64,
     /// Load `load` even when its checksum does not match (a map edited by
     /// hand), with a warning; every other check still applies. Default
     /// false: a damaged map is refused.
@@ -165,6 +175,8 @@ impl Default for MapSection {
             on_bad_map: "refuse".into(),
             turn_rate: 0.3,
             turn_for: 30.0,
+            drive_for: 4.0,
+            drive_speed: 0.2,
             ignore_checksum: false,
         }
     }
@@ -540,6 +552,8 @@ impl DaemonConfig {
         // Faster than the base allows is cut to its limit, like any command.
         within("map.turn_rate", self.map.turn_rate, 0.0, 10.0)?;
         within("map.turn_for", self.map.turn_for, 0.0, 3600.0)?;
+        within("map.drive_for", self.map.drive_for, 0.0, 100.0)?;
+        within("map.drive_speed", self.map.drive_speed, 0.0, 2.0)?;
         if !matches!(self.map.on_bad_map.as_str(), "refuse" | "new") {
             return Err(range(
                 "map.on_bad_map",

@@ -25,7 +25,8 @@ use super::checkpoint::{Checkpoint, CheckpointFailed};
 use super::config::DaemonConfig;
 use super::live::{LiveMapper, LiveStatus};
 use super::web::{ControlCommand, LiveView, MapView};
-use crate::geometry::Pose2;
+use crate::explore::{free_run, open_way};
+use crate::geometry::{BeamFault, Pose2, RangeScan};
 use crate::graph::{LoopSearchJob, LoopSearchResult, OptimisationJob, OptimisationResult};
 use crate::input::lms200::range_scan;
 use crate::pipeline::{MapSearch, PipelineError, ScanOutcome};
@@ -98,6 +99,34 @@ pub const TELEOP_TIMEOUT: f64 = 0.5;
 /// bridge resending its line), not a new hint.
 const REPEATED_HINT: f64 = 5.0;
 
+/// The drive of a search for the robot (see `Core::search_drive`): ways
+/// within this angle (rad) of the sensor's forward, which it sees ahead of
+/// it; looked along this far (m, the LMS200's reach in mm mode); a leg
+/// starts only where this much (m) is open and ends where the way ahead
+/// closes to this (m).
+const SEARCH_HALF_ANGLE: f64 = 60.0 * std::f64::consts::PI / 180.0;
+const SEARCH_REACH: f64 = 8.0;
+const SEARCH_MIN_LEG: f64 = 1.0;
+const SEARCH_STOP: f64 = 0.3;
+
+/// The points of `scan` in the robot frame (m), the sensor mounted at
+/// `mount`: a beam with no echo or beyond the range limit leaves its way
+/// open; one the sensor flagged (dazzled, low signal) is taken as a point
+/// a metre out, so the robot does not drive where it cannot see.
+fn scan_points(scan: &RangeScan, mount: &Pose2) -> Vec<[f64; 2]> {
+    (0..scan.ranges.len())
+        .filter_map(|i| {
+            let r = match scan.ranges[i] {
+                Ok(r) => r,
+                Err(BeamFault::SensorCode) => 1.0,
+                Err(BeamFault::NoReturn | BeamFault::OutOfRange) => return None,
+            };
+            let (s, c) = scan.angle(i).sin_cos();
+            Some(mount.transform_point([r * c, r * s]))
+        })
+        .collect()
+}
+
 /// The daemon's loop, sans-IO; see the module doc.
 #[derive(Debug)]
 pub struct Core {
@@ -136,12 +165,22 @@ pub struct Core {
     /// Optimisations taken in so far (each moves the whole map).
     optimisations: u64,
     /// Seconds the current search for the robot in a loaded map has run
-    /// with scans coming in, and whether that is past `turn_for` (the robot
-    /// then waits, stopped); whether the base turned for it at the last
-    /// control step, and when that step was.
+    /// with scans coming in, and whether that is past `turn_for` and the
+    /// drive after it is done (the robot then waits, stopped); whether the
+    /// base turned or drove for it at the last control step, and when that
+    /// step was.
     search_time: f64,
     search_waiting: bool,
     was_turning: bool,
+    /// The drive of a search that turning did not settle: the latest
+    /// scan's points (robot frame, m) while a search is on, the metres
+    /// driven for it, and the direction (rad, robot frame) of the leg
+    /// under way.
+    search_view: Vec<[f64; 2]>,
+    search_driven: f64,
+    search_leg: Option<f64>,
+    /// Seconds the drive turned in place for want of an open way.
+    search_seek: f64,
     /// The last velocity command from ROS 2 (`/cmd_vel`) and when it came.
     teleop: Option<(f64, Twist)>,
     /// Whether the last control step was driven by it.
@@ -214,6 +253,10 @@ impl Core {
             search_time: 0.0,
             search_waiting: false,
             was_turning: false,
+            search_view: Vec::new(),
+            search_driven: 0.0,
+            search_leg: None,
+            search_seek: 0.0,
             teleop: None,
             teleop_driving: false,
             last_control_at: None,
@@ -261,7 +304,17 @@ impl Core {
         self.poll_base(now);
         let scan = range_scan(scan, t, self.mode)?;
         let for_ros2 = self.ros2.is_some().then(|| scan.clone());
+        let view = self
+            .live
+            .mapper()
+            .map_search()
+            .is_some()
+            .then(|| scan_points(&scan, &self.config.mapper.laser_mount));
         let outcome = self.live.on_scan(scan, queued);
+        match view {
+            Some(points) if self.live.mapper().map_search().is_some() => self.search_view = points,
+            _ => self.search_view.clear(),
+        }
         if let (Some(out), Some(scan)) = (self.ros2.as_mut(), for_ros2) {
             let odometry = self.live.odometry_at(t);
             let cov = self.live.mapper().last_covariance();
@@ -415,9 +468,8 @@ impl Core {
                     theta = pose.theta,
                     "pose hint from {from}: looking for the robot there"
                 );
-                // A new search: the base may turn for it again.
-                self.search_time = 0.0;
-                self.search_waiting = false;
+                // A new search: the base may turn and drive for it again.
+                self.reset_search();
             }
             Err(e) => warn!("pose hint from {from} refused: {e}"),
         }
@@ -546,11 +598,25 @@ impl Core {
             );
             self.silence_logged = true;
         }
-        // A robot not (or no longer) found in a loaded map does not drive
-        // but turns in place for a while, so its scans see more of the
-        // place; one paused from the live view is held.
+        // A robot not (or no longer) found in a loaded map does not
+        // explore but turns in place for a while, so its scans see more of
+        // the place, then drives a few metres the open way; one paused
+        // from the live view is held.
+        let last_control = self.last_control_at;
         let searching = self.follow_search(now, sensor_ok);
-        let turning = searching && !self.search_waiting && self.config.map.turn_rate > 0.0;
+        let turned = self.search_waiting;
+        // Turned for the search without settling it: drive the open way
+        // (waiting, LOST, once that is done too).
+        let search_drive = if searching && turned && sensor_ok && !self.paused {
+            let dt = last_control.map_or(0.0, |t| (now - t).max(0.0));
+            let drive = self.search_drive(dt);
+            self.search_waiting = drive.is_none();
+            drive
+        } else {
+            None
+        };
+        let turning =
+            searching && !turned && self.config.map.turn_rate > 0.0 || search_drive.is_some();
         let teleop = self.teleop_command(now);
         if teleop.is_none() && self.teleop_driving {
             // A teleop that stopped sending stops the robot.
@@ -563,11 +629,11 @@ impl Core {
             Some(Twist::ZERO)
         } else if manual.is_none() && turning {
             self.live.hold_exploration(now);
-            Some(Twist {
+            Some(search_drive.unwrap_or(Twist {
                 vx: 0.0,
                 vy: 0.0,
                 omega: self.config.map.turn_rate,
-            })
+            }))
         } else {
             manual
         };
@@ -600,8 +666,7 @@ impl Core {
     fn follow_search(&mut self, now: f64, sensor_ok: bool) -> bool {
         let last = self.last_control_at.replace(now);
         if self.live.mapper().map_search().is_none() {
-            self.search_time = 0.0;
-            self.search_waiting = false;
+            self.reset_search();
             return false;
         }
         if sensor_ok && !self.paused {
@@ -609,6 +674,72 @@ impl Core {
         }
         self.search_waiting = self.search_time >= self.config.map.turn_for;
         true
+    }
+
+    /// A new search (or none): the base may turn and drive for it again.
+    fn reset_search(&mut self) {
+        self.search_time = 0.0;
+        self.search_waiting = false;
+        self.search_driven = 0.0;
+        self.search_leg = None;
+        self.search_seek = 0.0;
+    }
+
+    /// The velocity (robot frame, heading held) along the open way of the
+    /// latest scan (see [`open_way`]), `dt` (s) after the last step; none
+    /// once `drive_for` is driven. A leg goes on until the way ahead
+    /// closes to [`SEARCH_STOP`]; where no way of at least
+    /// [`SEARCH_MIN_LEG`] is open ahead (facing a wall), the base turns
+    /// in place until one is, for half a turn in all, then the drive is
+    /// over.
+    fn search_drive(&mut self, dt: f64) -> Option<Twist> {
+        let map = &self.config.map;
+        let speed = map.drive_speed.min(self.config.base.max_speed);
+        if self.search_driven >= map.drive_for || speed <= 0.0 || self.search_view.is_empty() {
+            self.search_leg = None;
+            // Done for this search: no later step starts it again.
+            self.search_driven = f64::INFINITY;
+            return None;
+        }
+        let radius = self.config.exploration.planner.clearance();
+        let ahead = |d: f64| free_run(&self.search_view, radius, d, SEARCH_REACH);
+        let leg = match self.search_leg {
+            Some(d) if ahead(d) > SEARCH_STOP => d,
+            _ => match open_way(&self.search_view, radius, SEARCH_HALF_ANGLE, SEARCH_REACH) {
+                Some((d, run)) if run >= SEARCH_MIN_LEG => {
+                    info!(
+                        direction_deg = d.to_degrees(),
+                        open_m = run,
+                        "not found by turning: driving the open way"
+                    );
+                    d
+                }
+                _ => {
+                    self.search_leg = None;
+                    let turn = map.turn_rate;
+                    if turn > 0.0 && self.search_seek < std::f64::consts::PI / turn {
+                        self.search_seek += dt;
+                        return Some(Twist {
+                            vx: 0.0,
+                            vy: 0.0,
+                            omega: turn,
+                        });
+                    }
+                    self.search_driven = f64::INFINITY;
+                    return None;
+                }
+            },
+        };
+        if self.search_leg.is_some() {
+            self.search_driven += speed * dt;
+        }
+        self.search_leg = Some(leg);
+        let (s, c) = leg.sin_cos();
+        Some(Twist {
+            vx: speed * c,
+            vy: speed * s,
+            omega: 0.0,
+        })
     }
 
     /// The status line's facts per part, for `/diagnostics`: the sensor,

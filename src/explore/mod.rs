@@ -9,6 +9,8 @@
 //! - [`planner`]: shortest paths in it ([`plan_path`]).
 //! - [`goal`]: the goal pose in front of a frontier.
 //! - [`memory`]: frontiers given up on, so none is chased forever.
+//! - [`open_way`]: the way to drive farthest in a scan, for a robot that
+//!   does not know where it is.
 //! - [`pursuit`]: [`next_step`], the choice of the next frontier.
 //! - [`follow`]: [`PathFollower`], velocities along a path for a holonomic base.
 //! - [`explorer`]: [`Explorer`], the pursuit as a running behaviour.
@@ -19,6 +21,7 @@ pub mod follow;
 pub mod free_space;
 pub mod goal;
 pub mod memory;
+pub mod open_way;
 pub mod planner;
 pub mod pursuit;
 
@@ -28,5 +31,6 @@ pub use follow::{DriveConfig, FollowStep, PathFollower};
 pub use free_space::{Corner, FreeSpace, FreeSpaceError};
 pub use goal::{Frontier, frontier_goal};
 pub use memory::ExplorationMemory;
+pub use open_way::{free_run, open_way};
 pub use planner::{PlanError, Reach, Until, path_length, plan_path, shortest_paths};
 pub use pursuit::{ExploreError, NextStep, next_step};
