@@ -10,6 +10,7 @@
 //! restarted under it, is picked up without a restart of the daemon.
 
 use clsmap_base::{BaseAdapter, Health, Limits, StaleGuard, Twist, limit};
+use lms200::recording::{Record, RecordQueue};
 use tracing::{error, info, warn};
 
 use super::live::LiveMapper;
@@ -43,6 +44,8 @@ pub struct BaseDriver {
     odometry_refused: u64,
     last_health: Option<Health>,
     pose_hint: Option<Pose2>,
+    /// Where odometry samples go for the sensor's recording, if anywhere.
+    recording: Option<RecordQueue>,
 }
 
 impl std::fmt::Debug for BaseDriver {
@@ -86,7 +89,15 @@ impl BaseDriver {
             odometry_refused: 0,
             last_health: None,
             pose_hint: None,
+            recording: None,
         }
+    }
+
+    /// Puts every odometry sample taken in into `queue` too, for the
+    /// sensor's recording (see [`RecordQueue`]), so a recorded run
+    /// replays with its odometry.
+    pub fn record_odometry_into(&mut self, queue: RecordQueue) {
+        self.recording = Some(queue);
     }
 
     /// A connector that hands over `adapter` once (a simulated or replayed
@@ -145,6 +156,16 @@ impl BaseDriver {
             let p = sample.pose;
             if !live.on_odometry(sample.t, Pose2::new(p.x, p.y, p.theta)) {
                 self.odometry_refused += 1;
+            } else if let Some(queue) = &self.recording {
+                // On the recordings' clock: as long before its reading now
+                // as the sample is before `now` on the daemon's.
+                let age_us = ((now - sample.t).max(0.0) * 1e6).round() as i64;
+                queue.push(Record::Odometry {
+                    t_us: lms200::driver::recording_micros() - age_us,
+                    x: p.x,
+                    y: p.y,
+                    theta: p.theta,
+                });
             }
         }
         if let Some(h) = base.pose_hint() {

@@ -235,8 +235,10 @@ pub struct SensorConfig {
     /// and 30 s).
     pub retry_initial: f64,
     pub retry_max: f64,
-    /// Record the raw telegram stream here (a new file per connection; an
-    /// existing one is never overwritten). Default: no recording.
+    /// Record the raw telegram stream here, with the base's odometry
+    /// samples, so `clsmap map` replays the run as it went (a new file per
+    /// connection; an existing one is never overwritten). Default: no
+    /// recording.
     pub record: Option<PathBuf>,
 }
 

@@ -420,8 +420,11 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     let mut rig = build_rig(&config, t0, epoch)?;
     let (scan_tx, mut scan_rx) = watch::channel::<Option<ScanSlot>>(None);
     let (report_tx, mut report_rx) = mpsc::unbounded_channel();
-    // The run's bag holds the serial stream too.
+    // The run's bag holds the serial stream too; a recording of it, the
+    // base's odometry as well.
     let raw_telegrams = config.daemon.bag.then(RawTelegrams::default);
+    let recorded_odometry = (raw_telegrams.is_some() || config.sensor.record.is_some())
+        .then(lms200::recording::RecordQueue::default);
     let sensor = SensorThread::spawn(
         SensorOptions {
             port: rig.sensor_port.clone(),
@@ -430,6 +433,7 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
             retry_max: Duration::from_secs_f64(config.sensor.retry_max),
             record: config.sensor.record.clone(),
             raw: raw_telegrams.clone(),
+            queued: recorded_odometry.clone(),
         },
         scan_tx,
         report_tx,
@@ -440,13 +444,16 @@ pub async fn run(config: DaemonConfig, hooks: Hooks<'_>) -> Result<RunSummary, D
     if let Some(w) = notifier.watchdog() {
         info!(interval_s = w.as_secs_f64(), "systemd watchdog enabled");
     }
-    let base = BaseDriver::new(
+    let mut base = BaseDriver::new(
         rig.base.take(),
         config.base.limits(),
         config.base.stale_odometry,
         config.sensor.retry_initial,
         config.sensor.retry_max,
     );
+    if let Some(queue) = recorded_odometry {
+        base.record_odometry_into(queue);
+    }
     let write_bag = config.daemon.bag;
     // The ROS 2 node before the loop starts: asked for, it must be there.
     #[cfg(feature = "dds")]

@@ -57,6 +57,8 @@ pub struct SensorOptions {
     pub record: Option<PathBuf>,
     /// Record the raw stream into this buffer too (for the run's bag).
     pub raw: Option<RawTelegrams>,
+    /// Records made on the loop (the base's odometry) for the recording.
+    pub queued: Option<lms200::recording::RecordQueue>,
 }
 
 /// The recording of the serial stream (the `.rec` format) as it grows,
@@ -295,6 +297,10 @@ fn attach_recording(
     if sinks.is_empty() {
         return Ok(driver);
     }
+    let driver = match &options.queued {
+        Some(queue) => driver.with_queued_records(queue.clone()),
+        None => driver,
+    };
     driver
         .with_recording(
             Box::new(Tee(sinks)),

@@ -362,7 +362,8 @@ fn run_with_a_bag(dir: &TempDir) -> PathBuf {
 /// the odometry and the transforms map → odom → base_link that chain to
 /// the pose, and base_link → laser once; the poses are those of
 /// trajectory.tum; the map as a grid and as lines; and the serial stream,
-/// whose bytes put end to end are a recording holding every scan.
+/// whose bytes put end to end are a recording holding every scan, with
+/// the base's odometry.
 #[test]
 fn run_writes_a_rosbag2_bag_whose_transforms_chain_to_its_poses() {
     use clsmap::ros2::bag::BagReader;
@@ -391,13 +392,21 @@ fn run_writes_a_rosbag2_bag_whose_transforms_chain_to_its_poses() {
     assert_eq!(counts.get("/map"), counts.get("/cls_map"), "{counts:?}");
     // The raw stream carries every scan the loop saw, and those it
     // skipped (the sensor streams faster than a debug build maps).
-    let raw_scans = clsmap::input::lms200::RecordingScans::new(&recording[..])
+    let raw: Vec<_> = clsmap::input::lms200::RecordingScans::new(&recording[..])
         .unwrap()
-        .filter(|s| s.is_ok())
-        .count();
+        .filter_map(Result::ok)
+        .collect();
+    let raw_scans = raw.len();
     assert!(
         raw_scans >= scans,
         "{raw_scans} scans in the raw stream, {scans} on /scan"
+    );
+    // With the base's odometry in it, so a replay maps as the run did:
+    // every scan but those before the first sample and after the last.
+    let with_odometry = raw.iter().filter(|s| s.odometry.is_some()).count();
+    assert!(
+        with_odometry + 10 >= raw_scans,
+        "{with_odometry} of {raw_scans} recorded scans with odometry"
     );
     // The demo's status line comes every second.
     assert!(

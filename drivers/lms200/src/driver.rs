@@ -10,7 +10,7 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use crate::link::{Event, Link, LinkConfig, LinkStats, Output};
-use crate::recording::{Record, RecordingError, RecordingWriter};
+use crate::recording::{Record, RecordQueue, RecordingError, RecordingWriter};
 use crate::serial::{SerialError, SerialTransport};
 
 /// Why the driver stopped before it was asked to.
@@ -30,6 +30,8 @@ pub struct SerialDriver {
     transport: SerialTransport,
     link: Link,
     recording: Option<RecordingWriter<Box<dyn Write + Send>>>,
+    /// Records made elsewhere, written into the recording as they come.
+    queued: Option<RecordQueue>,
 }
 
 impl std::fmt::Debug for SerialDriver {
@@ -55,6 +57,7 @@ impl SerialDriver {
             transport,
             link: Link::new(config, Instant::now()),
             recording: None,
+            queued: None,
         })
     }
 
@@ -75,10 +78,18 @@ impl SerialDriver {
             baud: self.transport.baud(),
         })?;
         Ok(SerialDriver {
-            transport: self.transport,
-            link: self.link,
             recording: Some(writer),
+            ..self
         })
+    }
+
+    /// Writes the records pushed into `queue` (odometry samples of the
+    /// base, say) into the recording too, when there is one.
+    pub fn with_queued_records(self, queue: RecordQueue) -> SerialDriver {
+        SerialDriver {
+            queued: Some(queue),
+            ..self
+        }
     }
 
     /// Link counters.
@@ -119,6 +130,7 @@ impl SerialDriver {
                     Output::Event(Event::Closed) => {
                         // The link is closed; there is nothing left to stop.
                         let _ = on_event(&Event::Closed);
+                        self.write_queued()?;
                         if let Some(r) = self.recording.as_mut() {
                             r.flush()?;
                         }
@@ -145,6 +157,7 @@ impl SerialDriver {
                 .min(MAX_WAIT);
             let n = self.transport.read(&mut buf, wait)?;
             let now = Instant::now();
+            self.write_queued()?;
             if n > 0 {
                 self.record(|t_us| Record::Rx {
                     t_us,
@@ -156,6 +169,16 @@ impl SerialDriver {
                 self.link.handle_timeout(now);
             }
         }
+    }
+
+    /// Writes the records waiting in the queue, if there is a recording.
+    fn write_queued(&mut self) -> Result<(), DriverError> {
+        if let (Some(r), Some(q)) = (self.recording.as_mut(), self.queued.as_ref()) {
+            for record in q.take() {
+                r.write(&record)?;
+            }
+        }
+        Ok(())
     }
 
     fn record(&mut self, make: impl FnOnce(i64) -> Record) -> Result<(), DriverError> {

@@ -182,6 +182,50 @@ impl<W: Write> RecordingWriter<W> {
     }
 }
 
+/// Records made on another thread (a robot's odometry, on its control
+/// loop) for the recording a [`crate::driver::SerialDriver`] writes: the
+/// driver writes them, in the order pushed, before the next chunk it
+/// records and at least every few tens of milliseconds. Bounded: beyond
+/// [`RecordQueue::CAPACITY`] records waiting (no recording is being
+/// written, the port is down) new ones are dropped and counted.
+#[derive(Debug, Clone, Default)]
+pub struct RecordQueue(std::sync::Arc<std::sync::Mutex<QueuedRecords>>);
+
+#[derive(Debug, Default)]
+struct QueuedRecords {
+    records: Vec<Record>,
+    dropped: u64,
+}
+
+impl RecordQueue {
+    /// Records waiting at most (a minute of 50 Hz odometry).
+    pub const CAPACITY: usize = 3000;
+
+    /// Queues `record` for the recording.
+    pub fn push(&self, record: Record) {
+        if let Ok(mut q) = self.0.lock() {
+            if q.records.len() < Self::CAPACITY {
+                q.records.push(record);
+            } else {
+                q.dropped += 1;
+            }
+        }
+    }
+
+    /// The records pushed since the last call, oldest first.
+    pub fn take(&self) -> Vec<Record> {
+        self.0
+            .lock()
+            .map(|mut q| std::mem::take(&mut q.records))
+            .unwrap_or_default()
+    }
+
+    /// Records dropped so far because the queue was full.
+    pub fn dropped(&self) -> u64 {
+        self.0.lock().map(|q| q.dropped).unwrap_or(0)
+    }
+}
+
 /// Reads records one by one. A damaged stretch comes as one
 /// [`RecordingError::Damaged`] (or, when nothing intact follows it,
 /// [`RecordingError::Corrupt`] or [`RecordingError::Truncated`], after
@@ -459,6 +503,27 @@ fn read_full(input: &mut impl Read, buf: &mut [u8]) -> io::Result<usize> {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn a_record_queue_hands_over_in_order_and_drops_beyond_its_bound() {
+        let queue = RecordQueue::default();
+        let odometry = |t_us| Record::Odometry {
+            t_us,
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+        };
+        for t in 0..(RecordQueue::CAPACITY as i64 + 5) {
+            queue.clone().push(odometry(t));
+        }
+        let taken = queue.take();
+        assert_eq!(taken.len(), RecordQueue::CAPACITY);
+        assert!(taken.iter().enumerate().all(|(i, r)| r.t_us() == i as i64));
+        assert_eq!(queue.dropped(), 5);
+        assert!(queue.take().is_empty());
+        queue.push(odometry(7));
+        assert_eq!(queue.take(), vec![odometry(7)]);
+    }
     use super::*;
 
     fn sample() -> Vec<Record> {
