@@ -29,6 +29,11 @@ pub struct Hypothesis {
     /// A translation direction (map frame, unit) the matched lines leave
     /// unconstrained, as in a plain corridor; the position along it is a guess.
     pub degenerate: Option<[f64; 2]>,
+    /// The shortfall (m) against the best place that this place was let
+    /// off with when [`disambiguate`](super::disambiguate) first tracked
+    /// it: a view it explained less from the start is no new evidence
+    /// against it, a shortfall growing beyond that is. Infinite until then.
+    pub allowance: f64,
 }
 
 /// Ranked hypotheses for one scan.
@@ -220,6 +225,7 @@ pub(crate) fn refine(
                 votes,
                 refined: true,
                 degenerate: r.degenerate,
+                allowance: f64::INFINITY,
             }
         }
         Err(_) => {
@@ -232,6 +238,7 @@ pub(crate) fn refine(
                 votes,
                 refined: false,
                 degenerate: None,
+                allowance: f64::INFINITY,
             }
         }
     }
@@ -488,6 +495,7 @@ mod tests {
             votes: score,
             refined: true,
             degenerate: None,
+            allowance: f64::INFINITY,
         };
         let r = rank(vec![h(0.0, 5.0), h(0.1, 4.0), h(3.0, 4.5)], &cfg);
         assert_eq!(r.hypotheses.len(), 2);
