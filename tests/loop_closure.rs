@@ -99,6 +99,26 @@ fn map_tour_with(
     (mapper, rmse, worst, applied)
 }
 
+/// [`map_tour_with`] with the defaults, jobs coming back 10 scans late
+/// and range noise from seed 4: the background runs compared here.
+fn map_tour_in_background(
+    world: &World,
+    truth: &[Pose2],
+    odo: &[Pose2],
+    handed_over: Option<&mut Vec<AnchoredPose>>,
+) -> (Mapper, f64, f64, usize) {
+    let config = MapperConfig::default();
+    map_tour_with(
+        world,
+        truth,
+        odo,
+        config,
+        &mut Rng::new(4),
+        Some(10),
+        handed_over,
+    )
+}
+
 const CORNERS: [[f64; 2]; 5] = [
     [1.0, 1.0],
     [23.0, 1.0],
@@ -214,15 +234,8 @@ fn optimisations_run_in_the_background_end_as_well_as_at_once() {
     let odo = drifting_odometry(&truth, 1.05, 0.04, &mut Rng::new(11));
     let config = MapperConfig::default();
     let (at_once, rmse_at_once, _) = map_tour(&world, &truth, &odo, config, &mut Rng::new(4));
-    let (background, rmse_background, heading, applied) = map_tour_with(
-        &world,
-        &truth,
-        &odo,
-        config,
-        &mut Rng::new(4),
-        Some(10),
-        None,
-    );
+    let (background, rmse_background, heading, applied) =
+        map_tour_in_background(&world, &truth, &odo, None);
     assert!(applied > 0, "no result came back while scans went on");
     let (a, b) = (
         at_once.keyframe_graph().stats(),
@@ -256,26 +269,9 @@ fn poses_handed_over_while_searches_run_keep_their_keyframes() {
     let world = World::long_loop();
     let truth = tour(&CORNERS, 2, 0.2);
     let odo = drifting_odometry(&truth, 1.02, 0.01, &mut Rng::new(11));
-    let config = MapperConfig::default();
-    let (held, ..) = map_tour_with(
-        &world,
-        &truth,
-        &odo,
-        config,
-        &mut Rng::new(4),
-        Some(10),
-        None,
-    );
+    let (held, ..) = map_tour_in_background(&world, &truth, &odo, None);
     let mut taken = Vec::new();
-    let (mut handing, ..) = map_tour_with(
-        &world,
-        &truth,
-        &odo,
-        config,
-        &mut Rng::new(4),
-        Some(10),
-        Some(&mut taken),
-    );
+    let (mut handing, ..) = map_tour_in_background(&world, &truth, &odo, Some(&mut taken));
     taken.extend(handing.take_trajectory());
     let merged = handing.keyframe_graph().stats().revisits_merged;
     assert!(merged > 40, "{merged} revisits merged");

@@ -205,37 +205,48 @@ fn rebuild_tum(
     keyframe_poses: &[Pose2],
     expected: usize,
 ) -> std::io::Result<bool> {
-    let anchored = pose_lines(record)?;
-    if anchored != expected {
-        warn!(
-            record = %record.display(),
-            anchored,
-            expected,
-            "the trajectory's record does not match {}: its poses stay in the frame they were written in",
-            tum.display()
-        );
-        return Ok(false);
-    }
     let started = std::time::Instant::now();
-    crate::files::durable::write_atomically_with(tum, |out| {
+    // Counted while streaming; a count that does not match fails the write,
+    // so the temporary file is dropped and the TUM file kept.
+    let mut anchored = None;
+    let written = crate::files::durable::write_atomically_with(tum, |out| {
         let mut out = BufWriter::new(out);
         writeln!(out, "{TUM_HEADER}")?;
         let input = BufReader::new(File::open(record)?);
-        read_anchored(input, |a| {
+        let count = read_anchored(input, |a| {
             let pose = a
                 .in_map(keyframe_poses)
                 .ok_or_else(|| unknown_keyframe(&a, keyframe_poses.len()))?;
             write_tum_lines(&mut out, &[(a.t, pose)])
         })
         .map_err(std::io::Error::other)?;
+        anchored = Some(count);
+        if count != expected {
+            return Err(std::io::Error::other("the record does not match"));
+        }
         out.flush()
-    })?;
-    info!(
-        poses = anchored,
-        ms = started.elapsed().as_secs_f64() * 1e3,
-        "trajectory rewritten in the corrected frame"
-    );
-    Ok(true)
+    });
+    match (written, anchored) {
+        (Ok(()), _) => {
+            info!(
+                poses = expected,
+                ms = started.elapsed().as_secs_f64() * 1e3,
+                "trajectory rewritten in the corrected frame"
+            );
+            Ok(true)
+        }
+        (Err(_), Some(anchored)) if anchored != expected => {
+            warn!(
+                record = %record.display(),
+                anchored,
+                expected,
+                "the trajectory's record does not match {}: its poses stay in the frame they were written in",
+                tum.display()
+            );
+            Ok(false)
+        }
+        (Err(e), _) => Err(e),
+    }
 }
 
 #[cfg(test)]

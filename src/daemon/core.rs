@@ -26,7 +26,7 @@ use super::config::DaemonConfig;
 use super::live::{LiveMapper, LiveStatus};
 use super::web::{ControlCommand, LiveView, MapView};
 use crate::explore::{free_run, open_way};
-use crate::geometry::{BeamFault, Pose2, RangeScan};
+use crate::geometry::{BeamFault, ExtractionConfig, Pose2, RangeScan};
 use crate::graph::{LoopSearchJob, LoopSearchResult, OptimisationJob, OptimisationResult};
 use crate::input::lms200::range_scan;
 use crate::pipeline::{MapSearch, PipelineError, ScanOutcome};
@@ -109,22 +109,22 @@ const SEARCH_REACH: f64 = 8.0;
 const SEARCH_MIN_LEG: f64 = 1.0;
 const SEARCH_STOP: f64 = 0.3;
 
-/// The points of `scan` in the robot frame (m), the sensor mounted at
-/// `mount`: a beam with no echo or beyond the range limit leaves its way
-/// open; one the sensor flagged (dazzled, low signal) is taken as a point
-/// a metre out, so the robot does not drive where it cannot see.
-fn scan_points(scan: &RangeScan, mount: &Pose2) -> Vec<[f64; 2]> {
-    (0..scan.ranges.len())
-        .filter_map(|i| {
-            let r = match scan.ranges[i] {
-                Ok(r) => r,
-                Err(BeamFault::SensorCode) => 1.0,
-                Err(BeamFault::NoReturn | BeamFault::OutOfRange) => return None,
-            };
-            let (s, c) = scan.angle(i).sin_cos();
-            Some(mount.transform_point([r * c, r * s]))
-        })
-        .collect()
+/// The points of `scan` in the robot frame (m) that the line extractor
+/// uses (`cfg`), the sensor mounted at `mount`; a beam the sensor flagged
+/// (dazzled, low signal) is added as a point a metre out, so the robot
+/// does not drive where it cannot see. A beam with no echo leaves its way
+/// open.
+fn scan_points(scan: &RangeScan, mount: &Pose2, cfg: &ExtractionConfig) -> Vec<[f64; 2]> {
+    let mut points = crate::geometry::scan_points(scan, mount, cfg);
+    points.extend(
+        (0..scan.ranges.len())
+            .filter(|&i| scan.ranges[i] == Err(BeamFault::SensorCode))
+            .map(|i| {
+                let (s, c) = scan.angle(i).sin_cos();
+                mount.transform_point([c, s])
+            }),
+    );
+    points
 }
 
 /// The daemon's loop, sans-IO; see the module doc.
@@ -304,12 +304,13 @@ impl Core {
         self.poll_base(now);
         let scan = range_scan(scan, t, self.mode)?;
         let for_ros2 = self.ros2.is_some().then(|| scan.clone());
-        let view = self
-            .live
-            .mapper()
-            .map_search()
-            .is_some()
-            .then(|| scan_points(&scan, &self.config.mapper.laser_mount));
+        let view = self.live.mapper().map_search().is_some().then(|| {
+            scan_points(
+                &scan,
+                &self.config.mapper.laser_mount,
+                &self.config.mapper.extraction,
+            )
+        });
         let outcome = self.live.on_scan(scan, queued);
         match view {
             Some(points) if self.live.mapper().map_search().is_some() => self.search_view = points,
