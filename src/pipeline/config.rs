@@ -163,7 +163,9 @@ pub struct MapperConfig {
     /// than too few matches (an inconsistent, non-converged or implausible
     /// fix) still updates the map at the predicted pose. Default false:
     /// such poses are doubtful and wrong walls in the map mislead every
-    /// later scan; scans of unmapped space (too few matches) always update.
+    /// later scan; scans of unmapped space (too few matches) update from
+    /// the second such scan in a row (the first is more often odometry gone
+    /// wrong in a fast turn).
     pub update_map_when_unlocalized: bool,
     /// When the map offers too few matches, localize against the previous
     /// scan's lines instead (line scan matching). Default true.

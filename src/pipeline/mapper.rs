@@ -72,6 +72,8 @@ pub struct Mapper {
     anchor_keyframe: Option<usize>,
     /// Whether the previous scan's fix was refused as an implausible jump.
     previous_refused_jump: bool,
+    /// Scans in a row local localization failed on.
+    unlocalized_run: usize,
     /// A loaded map's mode, the search for the start pose in it, the pose
     /// found (for the next scan's prediction), and whether the session's
     /// first keyframe is still to come.
@@ -123,6 +125,7 @@ impl Mapper {
             cls_stale: false,
             anchor_keyframe: None,
             previous_refused_jump: false,
+            unlocalized_run: 0,
             mode: None,
             start: None,
             seed: None,
@@ -787,6 +790,7 @@ impl Mapper {
             });
             match result {
                 Ok(fix) => {
+                    self.unlocalized_run = 0;
                     self.predictor.observe_heading(fix.pose.theta);
                     self.summary.heading_searches += usize::from(fix.heading_searched);
                     outcome.pose = fix.pose;
@@ -800,8 +804,22 @@ impl Mapper {
                 }
                 Err(e) => {
                     let kind = e.kind();
-                    may_update_map = self.config.update_map_when_unlocalized
-                        || matches!(e, Rejection::Localize(LocalizeError::TooFewMatches { .. }));
+                    // Too few matches is new territory, or a view of
+                    // too little to match (a bare wall up close), when it
+                    // lasts or the scan has hardly any lines. The first
+                    // scan after a localized one whose lines were enough
+                    // to match but did not is more likely odometry gone
+                    // wrong in a fast turn: CSAIL thinned to scans 0.6 m
+                    // or 0.3 rad apart had two 18–22° off, beyond every
+                    // gate, and learnt from, the first put its walls into
+                    // the map at that heading for every later scan to
+                    // match (5 m of relation error).
+                    self.unlocalized_run += 1;
+                    let unmapped =
+                        matches!(e, Rejection::Localize(LocalizeError::TooFewMatches { .. }))
+                            && (self.unlocalized_run > 1
+                                || self.lines.len() <= self.config.localizer.min_matches);
+                    may_update_map = self.config.update_map_when_unlocalized || unmapped;
                     self.summary.rejected_localizations += 1;
                     *self
                         .summary
@@ -1097,5 +1115,49 @@ mod tests {
         assert_eq!(summary.rejected_localizations, 2);
         assert_eq!(summary.scans_with_unchanged_odometry, 1);
         assert_eq!(summary.keyframes, 2);
+    }
+
+    #[test]
+    fn lines_that_fit_nowhere_right_after_a_fix_teach_the_map_nothing() {
+        let world = World::room_with_boxes();
+        let spec = ScanSpec::lms200_half_degree(0.0);
+        let mut rng = Rng::new(3);
+        let start = Pose2::new(3.0, 3.0, 0.0);
+        let mut mapper = Mapper::new(MapperConfig::default());
+        let scan_at =
+            |truth: &Pose2, t: f64, rng: &mut Rng| cast_scan(&world, truth, &spec, t, rng);
+        let first = mapper.process(&ScanRecord {
+            scan: scan_at(&start, 0.0, &mut rng),
+            odometry: Some(start),
+        });
+        assert!(first.keyframe);
+        let walls = mapper.map().len();
+        // The robot drove 0.6 m and turned 0.5 rad; odometry says it
+        // turned the other way (1 rad off, beyond any search): the lines
+        // are there but fit nowhere.
+        let truth = start.compose(&Pose2::new(0.6, 0.0, 0.5));
+        let glitch = start.compose(&Pose2::new(0.6, 0.0, -0.5));
+        let second = mapper.process(&ScanRecord {
+            scan: scan_at(&truth, 0.2, &mut rng),
+            odometry: Some(glitch),
+        });
+        assert!(second.lines > 2, "{second:?}");
+        assert_eq!(second.rejection, Some(RejectionKind::TooFewMatches));
+        assert!(!second.keyframe, "{second:?}");
+        assert_eq!(mapper.map().len(), walls);
+        // Odometry catches up: the next scan localizes against the walls
+        // the first one saw, none of them placed at the wrong heading.
+        let truth = truth.compose(&Pose2::new(0.6, 0.0, 0.0));
+        let third = mapper.process(&ScanRecord {
+            scan: scan_at(&truth, 0.4, &mut rng),
+            odometry: Some(truth),
+        });
+        assert!(third.localized, "{third:?}");
+        let moved = start.between(&truth);
+        assert!(
+            (third.pose.x - moved.x).hypot(third.pose.y - moved.y) < 0.05
+                && wrap_angle(third.pose.theta - moved.theta).abs() < 0.02,
+            "{third:?} vs {moved:?}"
+        );
     }
 }
