@@ -71,8 +71,8 @@ pub fn map(
         summary.degenerate_scans
     );
     println!(
-        "  localizations rejected:     {} {:?}",
-        summary.rejected_localizations, summary.rejections_by_kind
+        "  localizations rejected:     {} {:?}; {} kept out of the map (lines that fit nowhere right after a fix)",
+        summary.rejected_localizations, summary.rejections_by_kind, summary.held_back
     );
     println!(
         "  odometry heading:           σ ×{:.2} of the model (learnt); {} scans localized from a searched heading",

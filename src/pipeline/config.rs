@@ -165,7 +165,7 @@ pub struct MapperConfig {
     /// such poses are doubtful and wrong walls in the map mislead every
     /// later scan; scans of unmapped space (too few matches) update from
     /// the second such scan in a row (the first is more often odometry gone
-    /// wrong in a fast turn).
+    /// wrong in a fast turn), or at once when they hold hardly a line.
     pub update_map_when_unlocalized: bool,
     /// When the map offers too few matches, localize against the previous
     /// scan's lines instead (line scan matching). Default true.

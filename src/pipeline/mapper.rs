@@ -820,6 +820,13 @@ impl Mapper {
                             && (self.unlocalized_run > 1
                                 || self.lines.len() <= self.config.localizer.min_matches);
                     may_update_map = self.config.update_map_when_unlocalized || unmapped;
+                    self.summary.held_back += usize::from(
+                        !may_update_map
+                            && matches!(
+                                e,
+                                Rejection::Localize(LocalizeError::TooFewMatches { .. })
+                            ),
+                    );
                     self.summary.rejected_localizations += 1;
                     *self
                         .summary
@@ -1145,6 +1152,7 @@ mod tests {
         assert_eq!(second.rejection, Some(RejectionKind::TooFewMatches));
         assert!(!second.keyframe, "{second:?}");
         assert_eq!(mapper.map().len(), walls);
+        assert_eq!(mapper.summary().held_back, 1);
         // Odometry catches up: the next scan localizes against the walls
         // the first one saw, none of them placed at the wrong heading.
         let truth = truth.compose(&Pose2::new(0.6, 0.0, 0.0));

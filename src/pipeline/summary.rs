@@ -131,6 +131,10 @@ pub struct MappingSummary {
     pub rejected_localizations: usize,
     /// The failures by kind (`TooFewMatches`, `ImplausibleJump`, ...).
     pub rejections_by_kind: BTreeMap<String, usize>,
+    /// Scans with too few matches kept out of the map: the first after a
+    /// localized scan whose lines were enough to match (more likely
+    /// odometry gone wrong than new territory).
+    pub held_back: usize,
     /// Where a recording broke off, when it did (the scans before were mapped).
     pub input_broken: Option<String>,
     /// Input items skipped (malformed lines, bad odometry samples, damaged
