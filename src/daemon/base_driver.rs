@@ -207,6 +207,12 @@ impl BaseDriver {
                 if self.ever_connected {
                     // A restarted base counts its odometry from zero again.
                     live.odometry_restarted();
+                    if let Some(queue) = &self.recording {
+                        queue.push(Record::Note {
+                            t_us: lms200::driver::recording_micros(),
+                            text: lms200::recording::ODOMETRY_RESTARTED_NOTE.into(),
+                        });
+                    }
                 }
                 self.ever_connected = true;
                 self.adapter = Some(adapter);
@@ -393,6 +399,8 @@ mod tests {
         });
         let mut live = LiveMapper::new(MapperConfig::default(), None, 0.0);
         let mut d = BaseDriver::new(Some(connector), Limits::default(), 0.5, 1.0, 4.0);
+        let recording = RecordQueue::default();
+        d.record_odometry_into(recording.clone());
         d.poll(0.0, &mut live);
         assert_eq!(*connects.lock().unwrap(), 1);
         let go = Twist::new(0.5, 0.0, 0.0);
@@ -425,6 +433,17 @@ mod tests {
         d.poll(2.1, &mut live);
         assert_eq!(*connects.lock().unwrap(), 2);
         assert!(d.can_drive(2.1, Some(2.1)));
+        // The recording is told the odometry starts anew, once: a replay
+        // must not read the step back to zero as motion.
+        let restarts = recording
+            .take()
+            .into_iter()
+            .filter(|r| {
+                matches!(r, Record::Note { text, .. }
+                    if text == lms200::recording::ODOMETRY_RESTARTED_NOTE)
+            })
+            .count();
+        assert_eq!(restarts, 1);
         // No base at all: nothing to drive, nothing breaks.
         let mut none = BaseDriver::new(None, Limits::default(), 0.5, 1.0, 4.0);
         none.poll(0.0, &mut live);

@@ -6,7 +6,7 @@ use std::collections::VecDeque;
 use std::io::Read;
 
 use lms200::link::{scan_frame_len, timing};
-use lms200::recording::{Record, RecordingError, RecordingReader};
+use lms200::recording::{ODOMETRY_RESTARTED_NOTE, Record, RecordingError, RecordingReader};
 use lms200::{
     Baud, DecodeEvent, Decoder, Measurement, MeasuringMode, Reply, Scan, SpecialCode, Units,
     Variant,
@@ -137,6 +137,14 @@ pub struct RecordingScans<R: Read> {
     error: Option<InputError>,
     /// Time of the last scan queued, to skip scans out of time order.
     last_scan_t: Option<f64>,
+    /// The newest odometry pose handed on, and the frame the samples are
+    /// put into: after a restart of the base's odometry
+    /// ([`ODOMETRY_RESTARTED_NOTE`]) its new samples continue from the last
+    /// pose before it, so the step across reads as no motion, not as a
+    /// jump back to the origin.
+    last_odometry: Option<Pose2>,
+    odometry_frame: Pose2,
+    odometry_restarted: bool,
     ended: bool,
 }
 
@@ -152,6 +160,9 @@ impl<R: Read> RecordingScans<R> {
             skipped: VecDeque::new(),
             error: None,
             last_scan_t: None,
+            last_odometry: None,
+            odometry_frame: Pose2::IDENTITY,
+            odometry_restarted: false,
             ended: false,
         })
     }
@@ -224,15 +235,32 @@ impl<R: Read> RecordingScans<R> {
                     if let Some(m) = note_mode(&text) {
                         self.mode = m;
                     }
+                    self.odometry_restarted |= text == ODOMETRY_RESTARTED_NOTE;
                 }
                 Record::Odometry { t_us, x, y, theta } => {
                     let t = seconds(t_us);
+                    let sample = Pose2::new(x, y, theta);
+                    let frame = match self.last_odometry {
+                        Some(last)
+                            if self.odometry_restarted
+                                && [x, y, theta].iter().all(|v| v.is_finite()) =>
+                        {
+                            last.compose(&sample.inverse())
+                        }
+                        _ => self.odometry_frame,
+                    };
+                    let pose = frame.compose(&sample);
                     // A bad sample is skipped and reported; the track goes on.
-                    if let Err(error) = self.waiting.push_odometry(t, Pose2::new(x, y, theta)) {
-                        self.skipped.push_back(InputError::RecordingOdometry {
+                    match self.waiting.push_odometry(t, pose) {
+                        Ok(()) => {
+                            self.odometry_frame = frame;
+                            self.odometry_restarted = false;
+                            self.last_odometry = Some(pose);
+                        }
+                        Err(error) => self.skipped.push_back(InputError::RecordingOdometry {
                             offset: self.records.offset(),
                             error,
-                        });
+                        }),
                     }
                 }
                 Record::Tx { .. } => {}
@@ -274,6 +302,69 @@ mod tests {
         }
         .encode()
         .unwrap()
+    }
+
+    #[test]
+    fn odometry_restarted_by_a_reconnected_base_goes_on_from_where_it_was() {
+        let mut w = RecordingWriter::new(Vec::new()).unwrap();
+        w.write(&Record::Baud {
+            t_us: 0,
+            baud: 500_000,
+        })
+        .unwrap();
+        let odometry = |w: &mut RecordingWriter<Vec<u8>>, t_us: i64, x: f64| {
+            w.write(&Record::Odometry {
+                t_us,
+                x,
+                y: 0.0,
+                theta: 0.5,
+            })
+            .unwrap();
+        };
+        let scan = |w: &mut RecordingWriter<Vec<u8>>, t_us: i64| {
+            w.write(&Record::Rx {
+                t_us,
+                bytes: telegram(vec![2000; 361], Units::Mm),
+            })
+            .unwrap();
+        };
+        odometry(&mut w, 1_000_000, 3.0);
+        scan(&mut w, 1_100_000);
+        odometry(&mut w, 1_200_000, 4.0);
+        w.write(&Record::Note {
+            t_us: 1_300_000,
+            text: ODOMETRY_RESTARTED_NOTE.into(),
+        })
+        .unwrap();
+        // The base counts from zero again, and moves 1 m (x) in 0.2 s.
+        odometry(&mut w, 1_400_000, 0.0);
+        scan(&mut w, 1_500_000);
+        odometry(&mut w, 1_600_000, 1.0);
+        scan(&mut w, 1_700_000);
+        odometry(&mut w, 1_800_000, 2.0);
+        let records: Vec<ScanRecord> = RecordingScans::new(w.into_inner().as_slice())
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        assert_eq!(records.len(), 3);
+        let odo: Vec<Pose2> = records.iter().map(|r| r.odometry.unwrap()).collect();
+        // Each sample is (x, 0, 0.5) in its frame: after the restart the
+        // track goes on from (4, 0, 0.5), not from the origin.
+        let last = Pose2::new(4.0, 0.0, 0.5);
+        for pair in odo.windows(2) {
+            let step = pair[0].between(&pair[1]);
+            assert!(step.x.hypot(step.y) < 1.0 + 1e-6, "{odo:?}");
+            assert!(step.theta.abs() < 1e-9, "{odo:?}");
+        }
+        // The base moved along its (new) frame's x, which its heading
+        // turns 0.5 rad from: so it does from the pose before the restart.
+        for r in &odo[1..] {
+            let moved = last.between(r);
+            let along = moved.x.hypot(moved.y);
+            assert!(along < 1.5, "{odo:?}");
+            assert!((moved.y + along * 0.5f64.sin()).abs() < 1e-9, "{moved:?}");
+            assert!(moved.theta.abs() < 1e-9, "{moved:?}");
+        }
     }
 
     #[test]

@@ -45,6 +45,11 @@ pub const MAX_PAYLOAD: u32 = 1 << 20;
 const RECORD_CRC: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
 const HEADER_LEN: usize = 1 + 8 + 4;
 
+/// The [`Record::Note`] text that says the base's odometry counts from
+/// zero again from the next [`Record::Odometry`] on (the base was
+/// connected anew): a replay must not read the step across it as motion.
+pub const ODOMETRY_RESTARTED_NOTE: &str = "odometry restarted";
+
 /// One entry of a recording.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Record {
