@@ -143,7 +143,7 @@ pub struct RecordingScans<R: Read> {
     /// pose before it, so the step across reads as no motion, not as a
     /// jump back to the origin.
     last_odometry: Option<Pose2>,
-    odometry_frame: Pose2,
+    odometry_frame: Option<Pose2>,
     odometry_restarted: bool,
     ended: bool,
 }
@@ -161,7 +161,7 @@ impl<R: Read> RecordingScans<R> {
             error: None,
             last_scan_t: None,
             last_odometry: None,
-            odometry_frame: Pose2::IDENTITY,
+            odometry_frame: None,
             odometry_restarted: false,
             ended: false,
         })
@@ -245,11 +245,12 @@ impl<R: Read> RecordingScans<R> {
                             if self.odometry_restarted
                                 && [x, y, theta].iter().all(|v| v.is_finite()) =>
                         {
-                            last.compose(&sample.inverse())
+                            Some(last.compose(&sample.inverse()))
                         }
                         _ => self.odometry_frame,
                     };
-                    let pose = frame.compose(&sample);
+                    // Until a restart the samples are taken as they are.
+                    let pose = frame.map_or(sample, |f| f.compose(&sample));
                     // A bad sample is skipped and reported; the track goes on.
                     match self.waiting.push_odometry(t, pose) {
                         Ok(()) => {
