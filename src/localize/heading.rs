@@ -205,11 +205,18 @@ mod tests {
     /// An L-shaped corner and a far wall (robot frame), and the map of them
     /// with the robot at `truth`.
     fn corner(truth: &Pose2) -> (Vec<CogLine>, SegmentIndex) {
-        let local = vec![
-            line(FRAC_PI_2, [4.0, 0.5], 2.0),
-            line(std::f64::consts::PI, [1.5, 2.5], 2.5),
-            line(0.0, [2.0, -1.8], 2.0),
-        ];
+        seen_from(
+            truth,
+            vec![
+                line(FRAC_PI_2, [4.0, 0.5], 2.0),
+                line(std::f64::consts::PI, [1.5, 2.5], 2.5),
+                line(0.0, [2.0, -1.8], 2.0),
+            ],
+        )
+    }
+
+    /// `local` (robot frame) and the map of it with the robot at `truth`.
+    fn seen_from(truth: &Pose2, local: Vec<CogLine>) -> (Vec<CogLine>, SegmentIndex) {
         let mut map = SegmentIndex::new();
         for l in &local {
             map.insert(l.transformed(truth));
@@ -250,21 +257,15 @@ mod tests {
         );
     }
 
-    /// Six walls (robot frame) round the robot, and their map.
+    /// The corner's walls and three more round the robot, and their map.
     fn room(truth: &Pose2) -> (Vec<CogLine>, SegmentIndex) {
-        let local = vec![
-            line(FRAC_PI_2, [4.0, 0.5], 2.0),
-            line(std::f64::consts::PI, [1.5, 2.5], 2.5),
-            line(0.0, [2.0, -1.8], 2.0),
+        let (mut local, _) = corner(truth);
+        local.extend([
             line(FRAC_PI_2, [6.0, -3.0], 1.0),
             line(0.0, [5.0, -4.0], 1.0),
             line(std::f64::consts::PI, [3.0, 4.5], 1.0),
-        ];
-        let mut map = SegmentIndex::new();
-        for l in &local {
-            map.insert(l.transformed(truth));
-        }
-        (local, map)
+        ]);
+        seen_from(truth, local)
     }
 
     #[test]

@@ -815,18 +815,13 @@ impl Mapper {
                     // the map at that heading for every later scan to
                     // match (5 m of relation error).
                     self.unlocalized_run += 1;
-                    let unmapped =
-                        matches!(e, Rejection::Localize(LocalizeError::TooFewMatches { .. }))
-                            && (self.unlocalized_run > 1
-                                || self.lines.len() <= self.config.localizer.min_matches);
+                    let too_few =
+                        matches!(e, Rejection::Localize(LocalizeError::TooFewMatches { .. }));
+                    let unmapped = too_few
+                        && (self.unlocalized_run > 1
+                            || self.lines.len() <= self.config.localizer.min_matches);
                     may_update_map = self.config.update_map_when_unlocalized || unmapped;
-                    self.summary.held_back += usize::from(
-                        !may_update_map
-                            && matches!(
-                                e,
-                                Rejection::Localize(LocalizeError::TooFewMatches { .. })
-                            ),
-                    );
+                    self.summary.held_back += usize::from(too_few && !may_update_map);
                     self.summary.rejected_localizations += 1;
                     *self
                         .summary
