@@ -78,6 +78,12 @@ pub fn map(
         "  odometry heading:           σ ×{:.2} of the model (learnt); {} scans localized from a searched heading",
         summary.odometry_heading_scale, summary.heading_searches
     );
+    if config.odometry.max_scale_correction > 0.0 {
+        println!(
+            "  odometry distances:         ×{:.4} (learnt from the localized scans)",
+            summary.odometry_scale
+        );
+    }
     println!(
         "  mean time per scan:         {:.1} µs (extraction {:.1}, localization {:.1}; per keyframe: segment map {:.1}, CLS map {:.1})",
         t.per_scan_us, t.extract_us, t.localize_us, t.map_update_us, t.cls_update_us

@@ -8,7 +8,7 @@ use nalgebra::{Matrix3, Vector3};
 use tracing::{debug, trace_span, warn};
 
 use super::offline::SKIPPED_EXAMPLES;
-use super::prediction::{MotionPredictor, OdometryFeed, OdometryReading};
+use super::prediction::{Estimate, MotionPredictor, OdometryFeed, OdometryReading};
 use super::rejection::{Rejection, RejectionKind};
 use super::start::{HINT_COVARIANCE, MapMode, StartSearch};
 use super::summary::{LastScanTimes, MappingSummary, StageClocks};
@@ -306,6 +306,7 @@ impl Mapper {
         s.cls_loops = self.cls.loops().count();
         s.loops = self.graph.stats().clone();
         s.odometry_heading_scale = self.predictor.heading_scale(&self.config.odometry);
+        s.odometry_scale = self.predictor.odometry_scale(&self.config.odometry);
         s.mean_time = self.clocks.means();
         s
     }
@@ -978,12 +979,14 @@ impl Mapper {
             self.summary.keyframes += 1;
         }
 
-        self.predictor.record(outcome.pose, cov, outcome.localized);
+        // After a relocalization the step to here is the jump, not motion.
+        let estimate = match (relocated, outcome.localized) {
+            (true, _) => Estimate::Jumped,
+            (false, true) => Estimate::Localized,
+            (false, false) => Estimate::Predicted,
+        };
+        self.predictor.record(outcome.pose, cov, estimate);
         self.last_covariance = cov;
-        if relocated {
-            // The step to here is the jump, not motion to extrapolate.
-            self.predictor.jumped();
-        }
         // The fallback reference follows the map's rule: a scan at a
         // doubtful pose (a refused fix) does not become the reference the
         // next scan is matched against, or the next scan would agree with

@@ -159,6 +159,9 @@ pub struct MappingSummary {
     /// Factor on the odometry's heading σ learnt at the end of the run
     /// (1: the noise model fits; see `OdometryNoise::max_heading_scale`).
     pub odometry_heading_scale: f64,
+    /// Factor on the odometry's distances learnt at the end of the run
+    /// (1: taken as read; see `OdometryNoise::max_scale_correction`).
+    pub odometry_scale: f64,
     /// Scans localized from a searched heading because nothing matched
     /// from the odometry's (see `LocalizerConfig::heading_search`).
     pub heading_searches: usize,
