@@ -7,7 +7,9 @@
 //! vote: every scan line has twenty equally good partners.
 //!
 //! With the MIT CSAIL log at hand (`../shared/datasets/mit-csail/`), also
-//! the whole log's map (its walls, default mapper) and scan 1,000 of it.
+//! the whole log's map (its walls, default mapper) and scan 1,000 of it,
+//! and that scan's hypotheses tracked one scan on (`disambiguate`), judged
+//! by the walls alone and by the free space the map explored as well.
 //!
 //! `cargo bench --bench global_localization -- --warm-up-time 1 --measurement-time 3`
 
@@ -15,7 +17,7 @@ use std::hint::black_box;
 
 use clsmap::geometry::{CogLine, ExtractionConfig, Pose2, extract_lines};
 use clsmap::input::open_log;
-use clsmap::localize::global::{GlobalConfig, GlobalMap, global_localize};
+use clsmap::localize::global::{GlobalConfig, GlobalMap, disambiguate, global_localize};
 use clsmap::map::cls::{ClsMap, ClsMapConfig};
 use clsmap::pipeline::Mapper;
 use clsmap::pipeline::config::MapperConfig;
@@ -46,9 +48,9 @@ fn room_lines(world: &World) -> Vec<CogLine> {
     map.actual_segments().map(|s| s.line).collect()
 }
 
-/// The walls of the whole CSAIL log's map and the lines of its scan 1,000
-/// (robot frame), if the log is there.
-fn csail() -> Option<(Vec<CogLine>, Vec<CogLine>)> {
+/// The walls and CLS map of the whole CSAIL log's map and the lines of its
+/// scan 1,000 (robot frame), if the log is there.
+fn csail() -> Option<(Vec<CogLine>, ClsMap, Vec<CogLine>)> {
     let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../shared/datasets/mit-csail/mit-csail.clf");
     let records = open_log(&path).ok()?.collect::<Result<Vec<_>, _>>().ok()?;
@@ -62,7 +64,7 @@ fn csail() -> Option<(Vec<CogLine>, Vec<CogLine>)> {
     let walls = mapper.contents().walls.iter().map(|w| w.line).collect();
     let scan = &records.get(1000)?.scan;
     let lines = extract_lines(scan, &config.laser_mount, &config.extraction);
-    Some((walls, lines))
+    Some((walls, mapper.cls_map().clone(), lines))
 }
 
 /// `lines` copied onto an `nx` × `ny` grid of rooms 9 m × 7 m apart.
@@ -112,7 +114,7 @@ fn bench_global(c: &mut Criterion) {
         });
     }
     match csail() {
-        Some((walls, local)) => {
+        Some((walls, cls, local)) => {
             let map = GlobalMap::new(walls);
             let id = BenchmarkId::new("csail_map_segments", map.len());
             group.bench_with_input(id, &map, |b, map| {
@@ -120,6 +122,23 @@ fn bench_global(c: &mut Criterion) {
                     black_box(global_localize(black_box(&local), map, &cfg).map(|r| r.ambiguous))
                 })
             });
+            let found = global_localize(&local, &map, &cfg).ok();
+            let with_free = map.clone().with_free_space(&cls);
+            for (name, map) in [
+                ("csail_walls", &map),
+                ("csail_walls_free_space", &with_free),
+            ] {
+                let Some(found) = found.as_ref() else { break };
+                let id = BenchmarkId::new(format!("disambiguate_{name}"), found.hypotheses.len());
+                group.bench_with_input(id, map, |b, map| {
+                    b.iter(|| {
+                        black_box(
+                            disambiguate(found, black_box(&local), Pose2::IDENTITY, map, &cfg)
+                                .map(|r| r.hypotheses.len()),
+                        )
+                    })
+                });
+            }
         }
         None => eprintln!("CSAIL log not found: no CSAIL case"),
     }

@@ -180,7 +180,8 @@ impl Mapper {
                 .map_err(|e| PipelineError::StartMap(e.to_string()))?;
         mapper.first_session_keyframe = mode == MapMode::Extend;
         mapper.cls = contents.cls.with_config(config.cls_map());
-        mapper.start = Some(StartSearch::new(walls, GlobalConfig::default()));
+        mapper.start =
+            Some(StartSearch::new(walls, GlobalConfig::default()).with_free_space(&mapper.cls));
         mapper.mode = Some(mode);
         Ok(mapper)
     }
@@ -598,13 +599,16 @@ impl Mapper {
         let walls = self.map.index().iter().map(|(_, l)| *l);
         let odometry =
             odometry.filter(|p| p.x.is_finite() && p.y.is_finite() && p.theta.is_finite());
-        self.start = Some(StartSearch::hinted(
-            walls,
-            GlobalConfig::default(),
-            pose,
-            HINT_COVARIANCE,
-            odometry,
-        ));
+        self.start = Some(
+            StartSearch::hinted(
+                walls,
+                GlobalConfig::default(),
+                pose,
+                HINT_COVARIANCE,
+                odometry,
+            )
+            .with_free_space(&self.cls),
+        );
         self.relocalizer = None;
         self.lost_scans = 0;
         self.summary.pose_hints += 1;
@@ -859,7 +863,9 @@ impl Mapper {
                     "lost in the map: global localization again"
                 );
                 let walls = self.map.index().iter().map(|(_, l)| *l);
-                self.relocalizer = Some(StartSearch::new(walls, GlobalConfig::default()));
+                self.relocalizer = Some(
+                    StartSearch::new(walls, GlobalConfig::default()).with_free_space(&self.cls),
+                );
             }
             // A search costs milliseconds on a large map: every few scans.
             let due = self.lost_scans.is_multiple_of(RELOCALIZE_EVERY_SCANS);

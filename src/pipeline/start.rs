@@ -18,7 +18,7 @@ use crate::localize::global::{
     GlobalConfig, GlobalMap, GlobalResult, Hypothesis, disambiguate, global_localize, refute,
     same_place,
 };
-use crate::map::cls::LocalRegion;
+use crate::map::cls::{ClsMap, LocalRegion};
 
 /// Uncertainty of a pose hint: σ 0.5 m in x and y and 15° in heading (an
 /// operator's click on a map; RViz's "2D Pose Estimate" sends the same).
@@ -77,6 +77,14 @@ impl StartSearch {
             hinted: false,
             first_after_hint: false,
         }
+    }
+
+    /// The same search judging places also by the free space `cls`
+    /// explored: a wall the scan shows where the map saw through tells
+    /// look-alike places apart (see [`crate::localize::global::FreeSpace`]).
+    pub fn with_free_space(mut self, cls: &ClsMap) -> Self {
+        self.map = std::mem::take(&mut self.map).with_free_space(cls);
+        self
     }
 
     /// A search that starts from `pose` (map frame) with `covariance`, told

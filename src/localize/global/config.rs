@@ -85,6 +85,9 @@ pub struct GlobalConfig {
     /// stands inside the scan's free space at its pose (the beams went
     /// through where the map has a wall). Default 0.5 m, as for loop
     /// closures: a door left open or a moved chair, not a room's wall.
+    /// The same length bounds the converse while places are tracked: how
+    /// much more of the scan's walls may stand in the map's explored free
+    /// space at a place than at the place where the least does.
     pub max_free_space_conflict: f64,
     /// A wall point counts as inside the free space when farther than this
     /// (m) from its boundary. Default 0.15: pose and fit noise.

@@ -7,8 +7,10 @@ use parry2d_f64::bounding_volume::Aabb;
 use parry2d_f64::math::Vector;
 use parry2d_f64::partitioning::{Bvh, BvhNode};
 
+use super::free::FreeSpace;
 use crate::geometry::CogLine;
 use crate::geometry::SegmentIndex;
+use crate::map::cls::ClsMap;
 
 /// Map lines prepared for global localization (map frame).
 #[derive(Debug, Clone, Default)]
@@ -19,6 +21,8 @@ pub struct GlobalMap {
     bvh: Bvh,
     /// The same lines for [`localize`](crate::localize::localize).
     index: SegmentIndex,
+    /// The free space the map explored (empty unless given).
+    free: FreeSpace,
 }
 
 /// Bounding box of the points, grown by `margin` (m).
@@ -72,7 +76,24 @@ impl GlobalMap {
             bvh.insert(aabb_of(&[line.start, line.end], 0.0), key);
             index.insert(*line);
         }
-        GlobalMap { lines, bvh, index }
+        GlobalMap {
+            lines,
+            bvh,
+            index,
+            free: FreeSpace::default(),
+        }
+    }
+
+    /// The same map with the free space `cls` explored, against which
+    /// [`disambiguate`](super::disambiguate) also judges the places.
+    pub fn with_free_space(mut self, cls: &ClsMap) -> GlobalMap {
+        self.free = FreeSpace::new(cls);
+        self
+    }
+
+    /// The explored free space (empty unless given).
+    pub fn free_space(&self) -> &FreeSpace {
+        &self.free
     }
 
     /// The lines, longest first.

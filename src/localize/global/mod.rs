@@ -2,7 +2,8 @@
 //! robot, with no prediction at all?
 //!
 //! API:
-//! - `GlobalMap::new(lines)` — the map's actual segments (map frame).
+//! - `GlobalMap::new(lines)` — the map's actual segments (map frame);
+//!   `.with_free_space(&ClsMap)` adds the free space it explored.
 //! - `global_localize(&[CogLine] /* robot frame */, &GlobalMap, &GlobalConfig)
 //!    -> Result<GlobalResult { hypotheses, ambiguous }, GlobalError>`.
 //! - `disambiguate(&GlobalResult, lines, odometry motion, &GlobalMap, &GlobalConfig)`
@@ -26,12 +27,14 @@
 //! confirm, is flagged as ambiguous instead of being collapsed.
 
 mod config;
+mod free;
 mod map;
 mod search;
 mod track;
 mod vote;
 
 pub use config::GlobalConfig;
+pub use free::FreeSpace;
 pub use map::GlobalMap;
 pub(crate) use search::same_place;
 pub use search::{GlobalError, GlobalResult, Hypothesis, global_localize};

@@ -3,8 +3,10 @@
 //! localized locally with the new scan (kept where the odometry puts it
 //! when that fails); a hypothesis is dropped when the new scan leaves more
 //! unexplained there than at the best one, beyond what the scan it was
-//! first tracked from did, or most of the scan unexplained. [`refute`] drops those at which
-//! map walls stand in the scan's free space.
+//! first tracked from did, or most of the scan unexplained, or when more
+//! of the scan's walls stand in the map's explored free space there than
+//! at another place (see [`super::FreeSpace`]). [`refute`] drops those at
+//! which map walls stand in the scan's free space.
 
 use super::config::GlobalConfig;
 use super::map::GlobalMap;
@@ -53,6 +55,9 @@ pub fn disambiguate(
         .fold(0.0, f64::max);
     check_config(cfg)?;
     let mut moved: Vec<(Hypothesis, f64, f64)> = Vec::new();
+    // Length of the scan's walls standing where the map saw through, per
+    // place (none where the place along a corridor is a guess).
+    let mut conflicts: Vec<Option<f64>> = Vec::new();
     for h in &previous.hypotheses {
         let predicted = h.pose.compose(&motion);
         let mut prior = predicted_covariance(h, &motion, cfg);
@@ -77,6 +82,13 @@ pub fn disambiguate(
                 Err(_) => (predicted, prior, false, None),
             };
         let matched = explained_length(lines, map, &pose, cfg);
+        conflicts.push(
+            (degenerate.is_none() && !map.free_space().is_empty()).then(|| {
+                let seen: Vec<CogLine> = lines.iter().map(|l| l.transformed(&pose)).collect();
+                map.free_space()
+                    .length_inside(&seen, cfg.free_space_tolerance)
+            }),
+        );
         // The shortfall the place had when first tracked (a view it
         // explained less from the start says nothing new against it),
         // kept while it is tracked: a shortfall that grows a little with
@@ -107,16 +119,29 @@ pub fn disambiguate(
     // had when first tracked (the same view again drops nothing), or when
     // it leaves most of the scan unexplained there: when no place explains
     // the scan, the search starts over from this scan.
+    //
+    // The scan also drops a place where more of its walls stand in the
+    // map's explored free space than at the place where the fewest do,
+    // by more than `max_free_space_conflict`: a wall where the map saw
+    // through contradicts the place, scan after scan, where a wall the
+    // map lacks says only that the map may be incomplete there.
     let best = moved.iter().map(|m| m.1).fold(0.0, f64::max);
+    let least_conflict = conflicts
+        .iter()
+        .flatten()
+        .copied()
+        .fold(f64::INFINITY, f64::min);
     let shown: f64 = lines.iter().map(CogLine::length).sum();
     let survivors: Vec<Hypothesis> = moved
         .into_iter()
-        .filter(|(_, m, before)| {
+        .zip(conflicts)
+        .filter(|((_, m, before), conflict)| {
             best > 0.0
                 && *m >= cfg.min_explained * shown
                 && best - m <= cfg.consistency_margin + before.max(0.0)
+                && conflict.is_none_or(|c| c - least_conflict <= cfg.max_free_space_conflict)
         })
-        .map(|(h, _, _)| h)
+        .map(|((h, _, _), _)| h)
         .collect();
     if survivors.is_empty() {
         return global_localize(lines, map, cfg);
@@ -207,6 +232,93 @@ mod tests {
         let xs: Vec<f64> = result.hypotheses.iter().map(|h| h.pose.x).collect();
         assert_eq!(xs.len(), 1, "{result:#?}");
         assert!(xs[0].abs() < 0.05, "{xs:?}");
+        assert!(!result.ambiguous);
+    }
+
+    /// Two congruent 4 m rooms 10 m apart; only the first has a cupboard
+    /// (0.8 m by 0.4 m) by its south wall. The robot stands in the first
+    /// and sees the cupboard's face: the twin explains 0.8 m less, scan
+    /// after scan, which the shortfall it was first tracked with allows
+    /// for, so the walls alone never decide. The face stands where the
+    /// map saw through at the twin, and that drops it.
+    #[test]
+    fn a_wall_where_the_map_saw_through_drops_the_look_alike_place() {
+        use crate::map::cls::{ClsLoop, ClsMap, ClsSegment, ClsShape};
+        use std::f64::consts::{FRAC_PI_2, PI};
+        let room = |x0: f64| {
+            vec![
+                wall(0.0, [x0 + 2.0, 0.0], 2.0),
+                wall(FRAC_PI_2, [x0 + 4.0, 2.0], 2.0),
+                wall(PI, [x0 + 2.0, 4.0], 2.0),
+                wall(-FRAC_PI_2, [x0, 2.0], 2.0),
+            ]
+        };
+        let face = wall(0.0, [2.0, 1.2], 0.4);
+        let mut walls = room(0.0);
+        walls.push(face);
+        walls.extend(room(10.0));
+        let polygon = |points: &[[f64; 2]]| {
+            ClsLoop::new(
+                points
+                    .iter()
+                    .zip(points.iter().cycle().skip(1))
+                    .map(|(a, b)| ClsSegment::virtual_between(*a, *b))
+                    .collect(),
+            )
+        };
+        let square = |x0: f64| polygon(&[[x0, 0.0], [x0 + 4.0, 0.0], [x0 + 4.0, 4.0], [x0, 4.0]]);
+        let cupboard = polygon(&[[1.6, 0.8], [1.6, 1.2], [2.4, 1.2], [2.4, 0.8]]);
+        let explored = ClsMap::from_shapes(
+            Default::default(),
+            vec![
+                ClsShape {
+                    outer: square(0.0),
+                    holes: vec![cupboard],
+                },
+                ClsShape {
+                    outer: square(10.0),
+                    holes: Vec::new(),
+                },
+            ],
+        )
+        .unwrap();
+        let here = Pose2::new(2.0, 2.5, 0.3);
+        let there = Pose2::new(12.0, 2.5, 0.3);
+        let mut seen: Vec<CogLine> = room(0.0);
+        seen.push(face);
+        let lines: Vec<CogLine> = seen
+            .iter()
+            .map(|l| l.transformed(&here.inverse()))
+            .collect();
+        let shown: f64 = lines.iter().map(CogLine::length).sum();
+        let place = |pose: Pose2, matched: f64| Hypothesis {
+            pose,
+            covariance: [[1e-4, 0.0, 0.0], [0.0, 1e-4, 0.0], [0.0, 0.0, 1e-5]],
+            score: matched,
+            last_matched: matched,
+            votes: matched,
+            refined: true,
+            degenerate: None,
+            allowance: f64::INFINITY,
+        };
+        let start = GlobalResult {
+            hypotheses: vec![place(here, shown), place(there, shown - 0.8)],
+            ambiguous: true,
+        };
+        let cfg = GlobalConfig::default();
+        let track = |map: &GlobalMap| {
+            let mut result = start.clone();
+            for _ in 0..10 {
+                result = disambiguate(&result, &lines, Pose2::IDENTITY, map, &cfg).unwrap();
+            }
+            result
+        };
+        let walls_only = GlobalMap::new(walls.clone());
+        assert_eq!(track(&walls_only).hypotheses.len(), 2);
+        let with_free = GlobalMap::new(walls).with_free_space(&explored);
+        let result = track(&with_free);
+        assert_eq!(result.hypotheses.len(), 1, "{result:#?}");
+        assert!(result.hypotheses[0].pose.x < 5.0, "{result:#?}");
         assert!(!result.ambiguous);
     }
 }
