@@ -221,7 +221,9 @@ def main():
         report["scans"] = len(scans)
         if len(scans) >= 2:
             report["scan_rate_hz"] = (len(scans) - 1) / (scans[-1] - scans[0])
-        stopped, _ = request(port, [0x20, 0x25], 0xA0, timeout=2.0)
+        # The reply follows the telegram in flight (0.4 s at 19200 Bd); the
+        # rest is slack for a loaded machine running the emulator.
+        stopped, _ = request(port, [0x20, 0x25], 0xA0, timeout=5.0)
         if stopped is None:
             report["failed"] = "values on request"
             return report

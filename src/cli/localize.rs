@@ -54,11 +54,13 @@ pub fn localize(
     // The walls local localization matched against when the map was made
     // (version 2); a version-1 file has only the CLS map's actual segments.
     let contents = loaded.contents;
+    // With the free space the map explored, which `--track` judges places by.
     let global_map = if contents.walls.is_empty() {
         GlobalMap::new(contents.cls.actual_segments().map(|s| s.line))
     } else {
         GlobalMap::new(contents.walls.iter().map(|w| w.line))
-    };
+    }
+    .with_free_space(&contents.cls);
     anyhow::ensure!(
         !global_map.is_empty(),
         "the map {} has no walls (actual segments) to localize against",

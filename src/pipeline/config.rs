@@ -71,10 +71,9 @@ pub struct OdometryNoise {
     /// reckoned on them: 0.1 took the simulated loop world (2 % long
     /// odometry) from 23–48 mm to 6–16 mm mean pose error over seven
     /// seeds. Default 0 (off): the corridor and office worlds, whose error
-    /// is elsewhere, do not gain; a factor learnt from the fixes follows
-    /// their bias (CSAIL learns ×1.004 dense, ×1.015–1.019 thinned); and
-    /// one office map made so led a restart in it to a wrong, confident
-    /// place, which a restart must never be.
+    /// is elsewhere, do not gain, and a factor learnt from the fixes
+    /// follows their bias (CSAIL learns ×1.004 dense, ×1.015–1.019
+    /// thinned).
     pub max_scale_correction: f64,
 }
 

@@ -104,7 +104,6 @@ impl StartSearch {
             votes: 0.0,
             refined: false,
             degenerate: None,
-            allowance: f64::INFINITY,
         };
         let mut search = StartSearch::new(walls, config);
         search.last = Some((
@@ -291,7 +290,6 @@ mod tests {
             votes: 9.0,
             refined: true,
             degenerate: None,
-            allowance: f64::INFINITY,
         };
         let mut search = StartSearch::new(walls, GlobalConfig::default());
         search.last = Some((

@@ -69,13 +69,6 @@ pub struct GlobalConfig {
     pub odometry_sigma_per_rad: f64,
     /// Odometry noise floor for disambiguation (m and rad). Default 0.02.
     pub odometry_sigma_floor: f64,
-    /// A hypothesis survives a later scan when that scan's lines leave at
-    /// most this much more length (m) unexplained at its pose than at the
-    /// best hypothesis' pose, beyond what the previous scan left
-    /// unexplained there more than at the best. Default 0.5: more than fit and extent noise
-    /// (a few cm per line), less than a piece of furniture or a door
-    /// recess that only one of two symmetric places has.
-    pub consistency_margin: f64,
     /// A hypothesis survives a later scan only when that scan's lines lie
     /// on map lines at its pose for at least this fraction of their length.
     /// Default 0.5: the map was built from such scans, so at the right
@@ -127,7 +120,6 @@ impl Default for GlobalConfig {
             odometry_sigma_per_m: 0.05,
             odometry_sigma_per_rad: 0.05,
             odometry_sigma_floor: 0.02,
-            consistency_margin: 0.5,
             min_explained: 0.5,
             max_free_space_conflict: 0.5,
             free_space_tolerance: 0.15,

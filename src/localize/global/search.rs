@@ -29,11 +29,6 @@ pub struct Hypothesis {
     /// A translation direction (map frame, unit) the matched lines leave
     /// unconstrained, as in a plain corridor; the position along it is a guess.
     pub degenerate: Option<[f64; 2]>,
-    /// The shortfall (m) against the best place that this place was let
-    /// off with when [`disambiguate`](super::disambiguate) first tracked
-    /// it: a view it explained less from the start is no new evidence
-    /// against it, a shortfall growing beyond that is. Infinite until then.
-    pub allowance: f64,
 }
 
 /// Ranked hypotheses for one scan.
@@ -145,7 +140,6 @@ pub(crate) fn check_config(cfg: &GlobalConfig) -> Result<(), GlobalError> {
         (cfg.ambiguity_ratio, "ambiguity_ratio"),
         (cfg.odometry_sigma_per_m, "odometry_sigma_per_m"),
         (cfg.odometry_sigma_per_rad, "odometry_sigma_per_rad"),
-        (cfg.consistency_margin, "consistency_margin"),
         (cfg.min_explained, "min_explained"),
         (cfg.max_free_space_conflict, "max_free_space_conflict"),
         (cfg.free_space_tolerance, "free_space_tolerance"),
@@ -225,7 +219,6 @@ pub(crate) fn refine(
                 votes,
                 refined: true,
                 degenerate: r.degenerate,
-                allowance: f64::INFINITY,
             }
         }
         Err(_) => {
@@ -238,7 +231,6 @@ pub(crate) fn refine(
                 votes,
                 refined: false,
                 degenerate: None,
-                allowance: f64::INFINITY,
             }
         }
     }
@@ -495,7 +487,6 @@ mod tests {
             votes: score,
             refined: true,
             degenerate: None,
-            allowance: f64::INFINITY,
         };
         let r = rank(vec![h(0.0, 5.0), h(0.1, 4.0), h(3.0, 4.5)], &cfg);
         assert_eq!(r.hypotheses.len(), 2);
