@@ -20,7 +20,7 @@ use crate::graph::{
     OptimisationJob, OptimisationResult,
 };
 use crate::input::ScanRecord;
-use crate::localize::global::GlobalConfig;
+use crate::localize::global::{FreeSpace, GlobalConfig};
 use crate::localize::{LocalizationResult, LocalizeError, localize, localize_searching_heading};
 use crate::map::cls::{ClsError, ClsMap, local_region};
 use crate::map::{Keyframe, KeyframePolicy, MapContents, SegmentMap};
@@ -88,6 +88,9 @@ pub struct Mapper {
     /// that runs once there are [`LOST_AFTER_SCANS`].
     lost_scans: usize,
     relocalizer: Option<StartSearch>,
+    /// The free space of the loaded map, against which each fix is checked
+    /// (see [`MAX_AGAINST_LOADED_MAP`]); empty without a loaded map.
+    loaded_free: FreeSpace,
     /// A pose hint restarted the search (see [`Self::hint_pose`]).
     hinted: bool,
     /// The last scan's pose covariance (x, y, θ; m², m·rad, rad²).
@@ -105,6 +108,10 @@ pub struct Mapper {
 const LOST_AFTER_SCANS: usize = 5;
 /// While lost, global localization runs on every this many scans.
 const RELOCALIZE_EVERY_SCANS: usize = 5;
+/// A fix that puts more than this length (m) of the scan's walls in the
+/// loaded map's explored free space, away from its boundary and from
+/// every map wall, is not taken: the robot is not where it is thought.
+const MAX_AGAINST_LOADED_MAP: f64 = 1.0;
 
 impl Mapper {
     pub fn new(config: MapperConfig) -> Self {
@@ -133,6 +140,7 @@ impl Mapper {
             newest_is_session_start: false,
             lost_scans: 0,
             relocalizer: None,
+            loaded_free: FreeSpace::default(),
             hinted: false,
             last_covariance: [[0.0; 3]; 3],
             reframes: 0,
@@ -180,6 +188,7 @@ impl Mapper {
                 .map_err(|e| PipelineError::StartMap(e.to_string()))?;
         mapper.first_session_keyframe = mode == MapMode::Extend;
         mapper.cls = contents.cls.with_config(config.cls_map());
+        mapper.loaded_free = FreeSpace::new(&mapper.cls);
         mapper.start =
             Some(StartSearch::new(walls, GlobalConfig::default()).with_free_space(&mapper.cls));
         mapper.mode = Some(mode);
@@ -188,6 +197,20 @@ impl Mapper {
 
     pub fn config(&self) -> &MapperConfig {
         &self.config
+    }
+
+    /// Length (m) of this scan's lines that `pose` puts in the loaded map's
+    /// explored free space, away from its walls (0 without a loaded map).
+    fn against_loaded_map(&self, pose: &Pose2) -> f64 {
+        if self.loaded_free.is_empty() {
+            return 0.0;
+        }
+        let seen: Vec<CogLine> = self.lines.iter().map(|l| l.transformed(pose)).collect();
+        self.loaded_free.length_inside(
+            &seen,
+            GlobalConfig::default().free_space_tolerance,
+            self.map.index(),
+        )
     }
 
     pub fn map(&self) -> &SegmentMap {
@@ -789,6 +812,14 @@ impl Mapper {
                 let sigmas = mahalanobis(&fix.pose, &predicted, &predicted_cov);
                 if sigmas > self.config.max_correction_sigmas {
                     Err(Rejection::Inconsistent { sigmas })
+                } else {
+                    Ok(fix)
+                }
+            });
+            let result = result.and_then(|fix| {
+                let length = self.against_loaded_map(&fix.pose);
+                if length > MAX_AGAINST_LOADED_MAP {
+                    Err(Rejection::AgainstTheLoadedMap { length })
                 } else {
                     Ok(fix)
                 }

@@ -14,6 +14,10 @@ pub(super) enum Rejection {
     Localize(LocalizeError),
     #[error("correction of {sigmas:.1} σ from the odometry prediction")]
     Inconsistent { sigmas: f64 },
+    #[error(
+        "{length:.2} m of the scan's walls stand where the loaded map saw through and has no wall"
+    )]
+    AgainstTheLoadedMap { length: f64 },
 }
 
 impl Rejection {
@@ -28,6 +32,7 @@ impl Rejection {
                 LocalizeError::NotConverged { .. } => RejectionKind::NotConverged,
             },
             Rejection::Inconsistent { .. } => RejectionKind::InconsistentWithOdometry,
+            Rejection::AgainstTheLoadedMap { .. } => RejectionKind::AgainstTheLoadedMap,
         }
     }
 }
@@ -51,6 +56,10 @@ pub enum RejectionKind {
     InconsistentWithOdometry,
     /// Before the robot was found in a loaded map: no pose at all.
     NotFoundInTheMapYet,
+    /// The fix put walls of the scan where the loaded map saw through and
+    /// has no wall: the robot is not where it was thought (carried away,
+    /// or matched to the wrong walls).
+    AgainstTheLoadedMap,
 }
 
 impl RejectionKind {
@@ -65,6 +74,7 @@ impl RejectionKind {
             RejectionKind::NotConverged => "NotConverged",
             RejectionKind::InconsistentWithOdometry => "InconsistentWithOdometry",
             RejectionKind::NotFoundInTheMapYet => "NotFoundInTheMapYet",
+            RejectionKind::AgainstTheLoadedMap => "AgainstTheLoadedMap",
         }
     }
 }

@@ -20,7 +20,7 @@ use parry2d_f64::math::Vector;
 use parry2d_f64::partitioning::{Bvh, BvhNode};
 
 use super::map::aabb_of;
-use crate::geometry::{CogLine, point_segment_distance};
+use crate::geometry::{CogLine, SegmentIndex, point_segment_distance};
 use crate::map::cls::ClsMap;
 
 /// Spacing (m) of the points a line is judged at.
@@ -105,11 +105,16 @@ impl FreeSpace {
     }
 
     /// Length (m) of `lines` (map frame) lying in the explored free space
-    /// farther than `tolerance` from its boundary, judged every 5 cm.
+    /// farther than `tolerance` from its boundary and from every one of
+    /// `walls`, judged every 5 cm. A line on a map wall is explained, even
+    /// where the free space reaches past the wall: on real floors it does
+    /// (a door open at one time and shut at another, glass, a view from a
+    /// pose a little off).
     pub fn length_inside<'a>(
         &self,
         lines: impl IntoIterator<Item = &'a CogLine>,
         tolerance: f64,
+        walls: &SegmentIndex,
     ) -> f64 {
         let mut inside = 0.0;
         for l in lines {
@@ -125,7 +130,12 @@ impl FreeSpace {
                     l.start[0] + f * (l.end[0] - l.start[0]),
                     l.start[1] + f * (l.end[1] - l.start[1]),
                 ];
-                if self.strictly_contains(p, tolerance) {
+                let on_a_wall = || {
+                    walls
+                        .near(p, tolerance)
+                        .any(|w| point_segment_distance(p, w.start, w.end) <= tolerance)
+                };
+                if self.strictly_contains(p, tolerance) && !on_a_wall() {
                     inside += step;
                 }
             }
@@ -191,9 +201,24 @@ mod tests {
         let across = CogLine::from_centre(0.0, [2.0, 2.0], -1.8, 1.8, 0.001, 0.002, 100);
         // 3.6 m long, its ends 0.2 m from the walls; the pillar takes 1 m
         // and the tolerance 0.15 m on each side of it.
-        let inside = free.length_inside([&across], 0.15);
+        let none = SegmentIndex::new();
+        let inside = free.length_inside([&across], 0.15, &none);
         assert!((inside - (3.6 - 1.3)).abs() < 0.06, "{inside}");
         let wall = CogLine::from_centre(0.0, [2.0, 0.0], -2.0, 2.0, 0.001, 0.002, 100);
-        assert_eq!(free.length_inside([&wall], 0.15), 0.0);
+        assert_eq!(free.length_inside([&wall], 0.15, &none), 0.0);
+        // A map wall across the room (the free space reaching past it)
+        // explains the part of the line along it.
+        let mut walls = SegmentIndex::new();
+        walls.insert(CogLine::from_centre(
+            0.0,
+            [0.9, 2.0],
+            -0.5,
+            0.5,
+            0.001,
+            0.002,
+            100,
+        ));
+        let inside = free.length_inside([&across], 0.15, &walls);
+        assert!((inside - (3.6 - 1.3 - 1.0 - 0.15)).abs() < 0.06, "{inside}");
     }
 }

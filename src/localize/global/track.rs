@@ -85,7 +85,7 @@ pub fn disambiguate(
             (degenerate.is_none() && !map.free_space().is_empty()).then(|| {
                 let seen: Vec<CogLine> = lines.iter().map(|l| l.transformed(&pose)).collect();
                 map.free_space()
-                    .length_inside(&seen, cfg.free_space_tolerance)
+                    .length_inside(&seen, cfg.free_space_tolerance, map.index())
             }),
         );
         moved.push((
