@@ -93,6 +93,23 @@ impl CogLine {
         (self.end[0] - self.start[0]).hypot(self.end[1] - self.start[1])
     }
 
+    /// The segment cut into equal pieces at most `step` long (m), at least
+    /// one and at most 2²⁰: the pieces' length and their middle points.
+    /// How much of a line lies in a region is judged at these points.
+    pub fn samples(&self, step: f64) -> (f64, impl Iterator<Item = [f64; 2]> + '_) {
+        let len = self.length();
+        let n = ((len / step).ceil() as usize).clamp(1, 1 << 20);
+        let piece = len / n as f64;
+        let points = (0..n).map(move |k| {
+            let f = (k as f64 + 0.5) / n as f64;
+            [
+                self.start[0] + f * (self.end[0] - self.start[0]),
+                self.start[1] + f * (self.end[1] - self.start[1]),
+            ]
+        });
+        (piece, points)
+    }
+
     /// Unit vector along the segment, `[cos θ, sin θ]`.
     pub fn direction(&self) -> [f64; 2] {
         let (s, c) = self.theta.sin_cos();

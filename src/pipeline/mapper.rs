@@ -205,9 +205,9 @@ impl Mapper {
         if self.loaded_free.is_empty() {
             return 0.0;
         }
-        let seen: Vec<CogLine> = self.lines.iter().map(|l| l.transformed(pose)).collect();
+        let seen = self.lines.iter().map(|l| l.transformed(pose));
         self.loaded_free.length_inside(
-            &seen,
+            seen,
             GlobalConfig::default().free_space_tolerance,
             self.map.index(),
         )

@@ -110,33 +110,23 @@ impl FreeSpace {
     /// where the free space reaches past the wall: on real floors it does
     /// (a door open at one time and shut at another, glass, a view from a
     /// pose a little off).
-    pub fn length_inside<'a>(
+    pub fn length_inside(
         &self,
-        lines: impl IntoIterator<Item = &'a CogLine>,
+        lines: impl IntoIterator<Item = CogLine>,
         tolerance: f64,
         walls: &SegmentIndex,
     ) -> f64 {
+        let on_a_wall = |p: [f64; 2]| {
+            walls
+                .near(p, tolerance)
+                .any(|w| point_segment_distance(p, w.start, w.end) <= tolerance)
+        };
         let mut inside = 0.0;
         for l in lines {
-            let len = l.length();
-            if !len.is_finite() || len <= 0.0 {
-                continue;
-            }
-            let n = (len / SAMPLE_STEP).ceil().clamp(1.0, 1e6) as usize;
-            let step = len / n as f64;
-            for k in 0..n {
-                let f = (k as f64 + 0.5) / n as f64;
-                let p = [
-                    l.start[0] + f * (l.end[0] - l.start[0]),
-                    l.start[1] + f * (l.end[1] - l.start[1]),
-                ];
-                let on_a_wall = || {
-                    walls
-                        .near(p, tolerance)
-                        .any(|w| point_segment_distance(p, w.start, w.end) <= tolerance)
-                };
-                if self.strictly_contains(p, tolerance) && !on_a_wall() {
-                    inside += step;
+            let (piece, points) = l.samples(SAMPLE_STEP);
+            for p in points {
+                if self.strictly_contains(p, tolerance) && !on_a_wall(p) {
+                    inside += piece;
                 }
             }
         }
@@ -146,11 +136,12 @@ impl FreeSpace {
 
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::map::cls::{ClsLoop, ClsSegment, ClsShape};
 
-    fn loop_through(points: &[[f64; 2]]) -> ClsLoop {
+    /// The loop through `points`, in their order, of virtual segments.
+    pub(in crate::localize::global) fn loop_through(points: &[[f64; 2]]) -> ClsLoop {
         ClsLoop::new(
             points
                 .iter()
@@ -202,10 +193,10 @@ mod tests {
         // 3.6 m long, its ends 0.2 m from the walls; the pillar takes 1 m
         // and the tolerance 0.15 m on each side of it.
         let none = SegmentIndex::new();
-        let inside = free.length_inside([&across], 0.15, &none);
+        let inside = free.length_inside([across], 0.15, &none);
         assert!((inside - (3.6 - 1.3)).abs() < 0.06, "{inside}");
         let wall = CogLine::from_centre(0.0, [2.0, 0.0], -2.0, 2.0, 0.001, 0.002, 100);
-        assert_eq!(free.length_inside([&wall], 0.15, &none), 0.0);
+        assert_eq!(free.length_inside([wall], 0.15, &none), 0.0);
         // A map wall across the room (the free space reaching past it)
         // explains the part of the line along it.
         let mut walls = SegmentIndex::new();
@@ -218,7 +209,7 @@ mod tests {
             0.002,
             100,
         ));
-        let inside = free.length_inside([&across], 0.15, &walls);
+        let inside = free.length_inside([across], 0.15, &walls);
         assert!((inside - (3.6 - 1.3 - 1.0 - 0.15)).abs() < 0.06, "{inside}");
     }
 }

@@ -20,8 +20,6 @@ pub struct Hypothesis {
     /// (after [`disambiguate`](super::disambiguate): summed over the scans
     /// used).
     pub score: f64,
-    /// Of that, the length (m) the newest scan explained.
-    pub last_matched: f64,
     /// Local line length (m) that voted for the unrefined pose.
     pub votes: f64,
     /// Whether local localization refined the voted pose.
@@ -215,7 +213,6 @@ pub(crate) fn refine(
                 pose: r.pose,
                 covariance: r.covariance,
                 score,
-                last_matched: score,
                 votes,
                 refined: true,
                 degenerate: r.degenerate,
@@ -227,7 +224,6 @@ pub(crate) fn refine(
                 pose,
                 covariance: *prior,
                 score,
-                last_matched: score,
                 votes,
                 refined: false,
                 degenerate: None,
@@ -483,7 +479,6 @@ mod tests {
             pose: Pose2::new(x, 0.0, 0.0),
             covariance: diagonal(0.1, 0.05),
             score,
-            last_matched: score,
             votes: score,
             refined: true,
             degenerate: None,

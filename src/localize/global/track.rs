@@ -83,9 +83,9 @@ pub fn disambiguate(
         let matched = explained_length(lines, map, &pose, cfg);
         conflicts.push(
             (degenerate.is_none() && !map.free_space().is_empty()).then(|| {
-                let seen: Vec<CogLine> = lines.iter().map(|l| l.transformed(&pose)).collect();
+                let seen = lines.iter().map(|l| l.transformed(&pose));
                 map.free_space()
-                    .length_inside(&seen, cfg.free_space_tolerance, map.index())
+                    .length_inside(seen, cfg.free_space_tolerance, map.index())
             }),
         );
         moved.push((
@@ -93,7 +93,6 @@ pub fn disambiguate(
                 pose,
                 covariance,
                 score: h.score + matched,
-                last_matched: matched,
                 votes: h.votes,
                 refined,
                 degenerate,
@@ -168,17 +167,7 @@ mod tests {
         CogLine::from_centre(theta, centre, -half, half, 0.001, 0.002, 100)
     }
 
-    /// A loop of `points` (counter-clockwise) as a CLS loop.
-    fn polygon(points: &[[f64; 2]]) -> crate::map::cls::ClsLoop {
-        use crate::map::cls::{ClsLoop, ClsSegment};
-        ClsLoop::new(
-            points
-                .iter()
-                .zip(points.iter().cycle().skip(1))
-                .map(|(a, b)| ClsSegment::virtual_between(*a, *b))
-                .collect(),
-        )
-    }
+    use super::super::free::tests::loop_through as polygon;
 
     /// Explored free space made of the rectangles `[x0, x1] × [-2, 2]`.
     fn corridors(spans: &[[f64; 2]]) -> crate::map::cls::ClsMap {
@@ -219,7 +208,6 @@ mod tests {
             pose: Pose2::new(x, 0.0, 0.0),
             covariance: [[1e-4, 0.0, 0.0], [0.0, 1e-4, 0.0], [0.0, 0.0, 1e-5]],
             score: 12.0,
-            last_matched: 12.0,
             votes: 12.0,
             refined: true,
             degenerate: None,
@@ -306,7 +294,6 @@ mod tests {
             pose,
             covariance: [[1e-4, 0.0, 0.0], [0.0, 1e-4, 0.0], [0.0, 0.0, 1e-5]],
             score: matched,
-            last_matched: matched,
             votes: matched,
             refined: true,
             degenerate: None,

@@ -134,17 +134,10 @@ impl LocalRegion {
     ) -> f64 {
         let mut inside = 0.0;
         for l in lines {
-            let len = l.length();
-            let n = ((len / 0.05).ceil() as usize).max(1);
-            let step = len / n as f64;
-            for k in 0..n {
-                let f = (k as f64 + 0.5) / n as f64;
-                let p = [
-                    l.start[0] + f * (l.end[0] - l.start[0]),
-                    l.start[1] + f * (l.end[1] - l.start[1]),
-                ];
+            let (piece, points) = l.samples(0.05);
+            for p in points {
                 if self.strictly_contains(p, tolerance) {
-                    inside += step;
+                    inside += piece;
                 }
             }
         }
