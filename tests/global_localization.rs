@@ -203,15 +203,17 @@ fn the_middle_of_a_plain_corridor_is_ambiguous() {
 
 #[test]
 fn a_rotation_in_place_resolves_a_symmetric_view() {
-    // A 10 m × 6 m room with a 0.5 m pillar by the middle of its north
-    // wall (x 4.75–5.25). Facing east from (5.5, 3) the robot sees the
-    // room's east half, the same as facing west from (4.5, 3) shows of the
+    // A 10 m × 6 m room with a 1 m × 0.5 m pillar by the middle of its
+    // north wall (x 4.5–5.5). Facing east from (6, 3) the robot sees the
+    // room's east half, the same as facing west from (4, 3) shows of the
     // west half; neither view reaches the pillar. After a half turn the
     // pillar is on the robot's right, where at the twin place it would be
-    // on its left.
+    // on its left: seen from the twin, the pillar's 1 m face stands 0.55 m
+    // out from the south wall, in the free space the map explored there
+    // (a pillar half as wide would be at the 0.5 m the search forgives).
     let mut world = World::new();
     world.add_polyline(&[[0.0, 0.0], [10.0, 0.0], [10.0, 6.0], [0.0, 6.0]], true);
-    world.add_box([5.0, 5.7], [0.25, 0.25], 0.0);
+    world.add_box([5.0, 5.7], [0.5, 0.25], 0.0);
     let poses = path(
         &[
             [5.0, 1.0],
@@ -228,15 +230,15 @@ fn a_rotation_in_place_resolves_a_symmetric_view() {
     let cfg = GlobalConfig::default();
     let mut rng = Rng::new(52);
 
-    let truth = Pose2::new(5.5, 3.0, 0.0);
-    let twin = Pose2::new(4.5, 3.0, std::f64::consts::PI);
+    let truth = Pose2::new(6.0, 3.0, 0.0);
+    let twin = Pose2::new(4.0, 3.0, std::f64::consts::PI);
     let first = global_localize(&scan_lines(&world, &truth, &mut rng), &gmap, &cfg).unwrap();
     eprintln!("first scan: {first:#?}");
     assert!(first.ambiguous);
     assert!(rank_of_truth(&first, &truth).is_some_and(|r| r < 3));
     assert!(rank_of_truth(&first, &twin).is_some_and(|r| r < 3));
 
-    let turned = Pose2::new(5.5, 3.0, std::f64::consts::PI);
+    let turned = Pose2::new(6.0, 3.0, std::f64::consts::PI);
     let motion = truth.between(&turned);
     let lines = scan_lines(&world, &turned, &mut rng);
     let second = disambiguate(&first, &lines, motion, &gmap, &cfg).unwrap();

@@ -8,8 +8,8 @@
 #![allow(clippy::unwrap_used)]
 
 use clsmap::geometry::{
-    CogLine, ExtractionConfig, Pose2, RangeNoise, SegmentIndex, extract_lines,
-    point_segment_distance, wrap_angle,
+    CogLine, CorrespondenceConfig, ExtractionConfig, Pose2, RangeNoise, SegmentIndex,
+    extract_lines, lines_correspond, point_segment_distance, wrap_angle,
 };
 use clsmap::localize::{
     LineConstraints, LocalizationResult, LocalizeError, LocalizerConfig, localize,
@@ -128,19 +128,35 @@ fn sample_pose(place: Place, world: &World, rng: &mut Rng, near: Option<Pose2>) 
     }
 }
 
+/// A scan pair is a case when the second scan shows at least two walls of
+/// the first at the true pose: with one, nothing can fix the pose, and
+/// refusing is the right answer, not a failure.
 fn make_case(place: Place, world: &World, sigma: f64, seed: u64) -> Case {
     let mut rng = Rng::new(seed);
     let cfg = extraction_config(sigma);
     let spec = ScanSpec::lms200_half_degree(sigma);
-    let reference = sample_pose(place, world, &mut rng, None);
-    let truth = sample_pose(place, world, &mut rng, Some(reference));
-    let scan_ref = cast_scan(world, &reference.compose(&MOUNT), &spec, 0.0, &mut rng);
-    let scan_now = cast_scan(world, &truth.compose(&MOUNT), &spec, 0.1, &mut rng);
-    let mut map = SegmentIndex::new();
-    for l in extract_lines(&scan_ref, &MOUNT, &cfg) {
-        map.insert(l.transformed(&reference));
-    }
-    let local = extract_lines(&scan_now, &MOUNT, &cfg);
+    let (truth, map, local) = loop {
+        let reference = sample_pose(place, world, &mut rng, None);
+        let truth = sample_pose(place, world, &mut rng, Some(reference));
+        let scan_ref = cast_scan(world, &reference.compose(&MOUNT), &spec, 0.0, &mut rng);
+        let scan_now = cast_scan(world, &truth.compose(&MOUNT), &spec, 0.1, &mut rng);
+        let mut map = SegmentIndex::new();
+        for l in extract_lines(&scan_ref, &MOUNT, &cfg) {
+            map.insert(l.transformed(&reference));
+        }
+        let local = extract_lines(&scan_now, &MOUNT, &cfg);
+        let shared = local
+            .iter()
+            .filter(|l| {
+                let seen = l.transformed(&truth);
+                map.iter()
+                    .any(|(_, m)| lines_correspond(&seen, m, &CorrespondenceConfig::default()))
+            })
+            .count();
+        if shared >= 2 {
+            break (truth, map, local);
+        }
+    };
     let d = rng.uniform_range(0.0, 0.2);
     let a = rng.uniform_range(-3.2, 3.2);
     let turn = rng.uniform_range(-10.0, 10.0).to_radians();

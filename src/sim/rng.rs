@@ -1,31 +1,23 @@
-//! A tiny seeded pseudo-random generator for simulations and tests:
-//! the driver's xorshift64* for uniform numbers, Box–Muller for Gaussian
-//! ones. Same seed, same sequence, on every platform.
+//! The seeded generator of simulations and tests: xoshiro256++
+//! (`rand_xoshiro`) for uniform numbers, `rand_distr`'s standard normal for
+//! Gaussian ones. Same seed, same sequence, on every platform.
 
-use lms200::emulator::XorShift64;
+use rand_distr::{Distribution, StandardNormal, StandardUniform};
+use rand_xoshiro::Xoshiro256PlusPlus;
+use rand_xoshiro::rand_core::{Rng as _, SeedableRng};
 
-/// Seeded generator (xorshift64*, Vigna 2016). Not for cryptography.
-///
-/// Wraps [`XorShift64`] so the workspace has one xorshift implementation.
+/// Seeded generator (xoshiro256++). Not for cryptography.
 #[derive(Debug, Clone)]
 pub struct Rng {
-    bits: XorShift64,
-    /// Second Box–Muller deviate, kept for the next call.
-    spare_gaussian: Option<f64>,
+    bits: Xoshiro256PlusPlus,
 }
 
 impl Rng {
-    /// A generator for `seed`; every seed (including 0) is valid. The seed
-    /// is scrambled with SplitMix64 so nearby seeds give unrelated streams.
+    /// A generator for `seed`; every seed (including 0) is valid, and
+    /// nearby seeds give unrelated streams (SplitMix64 seeding).
     pub fn new(seed: u64) -> Self {
-        let mut z = seed.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
         Rng {
-            // `XorShift64::new` remaps a zero state itself.
-            bits: XorShift64::new(z),
-            spare_gaussian: None,
+            bits: Xoshiro256PlusPlus::seed_from_u64(seed),
         }
     }
 
@@ -36,7 +28,7 @@ impl Rng {
 
     /// Uniform in [0, 1), 53 bits of precision.
     pub fn uniform(&mut self) -> f64 {
-        self.bits.next_f64()
+        StandardUniform.sample(&mut self.bits)
     }
 
     /// Uniform in [lo, hi).
@@ -46,16 +38,7 @@ impl Rng {
 
     /// Standard normal deviate (mean 0, standard deviation 1).
     pub fn gaussian(&mut self) -> f64 {
-        if let Some(g) = self.spare_gaussian.take() {
-            return g;
-        }
-        // Box–Muller; 1 − u keeps the logarithm's argument in (0, 1].
-        let u1 = 1.0 - self.uniform();
-        let u2 = self.uniform();
-        let radius = (-2.0 * u1.ln()).sqrt();
-        let (s, c) = (std::f64::consts::TAU * u2).sin_cos();
-        self.spare_gaussian = Some(radius * s);
-        radius * c
+        StandardNormal.sample(&mut self.bits)
     }
 
     /// Normal deviate with standard deviation `sigma`.

@@ -3,9 +3,9 @@
 //! Byte faults (garbage, bit flips, drops) hit both directions of the line,
 //! as noise on a real cable would: corrupted requests earn a NAK from the
 //! sensor, corrupted replies are the driver's problem. All randomness comes
-//! from the emulator's seeded [`XorShift64`], so a fault run is reproducible.
+//! from the emulator's seeded [`FaultRng`], so a fault run is reproducible.
 
-use super::prng::XorShift64;
+use super::prng::FaultRng;
 
 /// Per-byte line faults and sensor misbehaviour. `Default` is a clean line.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -63,7 +63,7 @@ impl LineNoise {
         &mut self,
         input: &[u8],
         faults: &FaultConfig,
-        rng: &mut XorShift64,
+        rng: &mut FaultRng,
         counts: &mut FaultCounts,
         out: &mut Vec<u8>,
     ) {
@@ -98,7 +98,7 @@ impl LineNoise {
 /// Garbles bytes as a UART at the wrong line speed would: the receiver
 /// samples the wrong bit cells, so it sees different byte values, sometimes
 /// framing errors (byte lost) and sometimes two bytes where one was sent.
-pub(crate) fn garble_wrong_baud(input: &[u8], rng: &mut XorShift64, out: &mut Vec<u8>) {
+pub(crate) fn garble_wrong_baud(input: &[u8], rng: &mut FaultRng, out: &mut Vec<u8>) {
     for &byte in input {
         match rng.below(8) {
             0 | 1 => {} // framing error: byte lost
@@ -118,7 +118,7 @@ mod tests {
     #[test]
     fn clean_line_passes_bytes_unchanged() {
         let mut noise = LineNoise::default();
-        let mut rng = XorShift64::new(1);
+        let mut rng = FaultRng::new(1);
         let mut counts = FaultCounts::default();
         let mut out = Vec::new();
         noise.apply(
@@ -135,7 +135,7 @@ mod tests {
     #[test]
     fn flips_are_never_in_adjacent_bytes() {
         let mut noise = LineNoise::default();
-        let mut rng = XorShift64::new(9);
+        let mut rng = FaultRng::new(9);
         let mut counts = FaultCounts::default();
         let faults = FaultConfig {
             bit_flip_per_byte: 0.9,
@@ -160,7 +160,7 @@ mod tests {
     #[test]
     fn faults_of_different_kinds_are_never_in_neighbouring_bytes() {
         let mut noise = LineNoise::default();
-        let mut rng = XorShift64::new(11);
+        let mut rng = FaultRng::new(11);
         let mut counts = FaultCounts::default();
         let faults = FaultConfig {
             garbage_per_byte: 0.3,
@@ -189,7 +189,7 @@ mod tests {
     #[test]
     fn drops_and_garbage_change_the_length_and_are_counted() {
         let mut noise = LineNoise::default();
-        let mut rng = XorShift64::new(5);
+        let mut rng = FaultRng::new(5);
         let mut counts = FaultCounts::default();
         let faults = FaultConfig {
             garbage_per_byte: 0.1,
@@ -207,7 +207,7 @@ mod tests {
 
     #[test]
     fn wrong_baud_never_passes_a_telegram_intact() {
-        let mut rng = XorShift64::new(3);
+        let mut rng = FaultRng::new(3);
         let input = [0x02, 0x80, 0x03, 0x00, 0xA0, 0x00, 0x10, 0x16, 0x0A];
         for _ in 0..100 {
             let mut out = Vec::new();

@@ -36,7 +36,7 @@ use crate::{Baud, ConfigBlock, Reply, RequestDecoder, Variant};
 
 pub use config::EmulatorConfig;
 pub use faults::{FaultConfig, FaultCounts};
-pub use prng::XorShift64;
+pub use prng::FaultRng;
 pub use range_source::{RangeSource, RoomRangeSource};
 pub use scans::SentScan;
 
@@ -94,7 +94,7 @@ enum Power {
 /// An emulated LMS200. See the module documentation.
 pub struct Emulator {
     config: EmulatorConfig,
-    rng: XorShift64,
+    rng: FaultRng,
     faults: FaultConfig,
     noise_to_host: LineNoise,
     noise_to_sensor: LineNoise,
@@ -163,7 +163,7 @@ impl Emulator {
             None => Power::Ready,
         };
         let mut emulator = Self {
-            rng: XorShift64::new(config.seed),
+            rng: FaultRng::new(config.seed),
             faults: config.faults.clone(),
             noise_to_host: LineNoise::default(),
             noise_to_sensor: LineNoise::default(),
