@@ -17,20 +17,7 @@ use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
 use std::path::PathBuf;
 
 mod common;
-use common::{drifting_odometry, tour};
-
-fn csail_dir() -> Option<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/datasets/mit-csail");
-    if dir.join("mit-csail.clf").is_file() && dir.join("mit-csail.relations").is_file() {
-        Some(dir)
-    } else {
-        eprintln!(
-            "SKIPPED: CSAIL dataset not found at {} (expected mit-csail.clf and mit-csail.relations)",
-            dir.display()
-        );
-        None
-    }
-}
+use common::{csail_dir, drifting_odometry, tour};
 
 /// The first `n` scans of the CSAIL log and the relations inside them.
 fn csail_head(dir: &std::path::Path, n: usize) -> (Vec<ScanRecord>, Vec<Relation>) {

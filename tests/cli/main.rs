@@ -208,19 +208,6 @@ const BEAMS: usize = 361;
 // The CSAIL log, read independently of the library.
 // ---------------------------------------------------------------------------
 
-fn csail_dir() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/datasets/mit-csail");
-    if dir.join("mit-csail.clf").is_file() && dir.join("mit-csail.relations").is_file() {
-        Some(dir)
-    } else {
-        eprintln!(
-            "SKIPPED (part): CSAIL dataset not found at {} (mit-csail.clf, mit-csail.relations)",
-            dir.display()
-        );
-        None
-    }
-}
-
 /// One FLASER line: ranges in cm (81.91 m → 8191), odometry, ipc time.
 struct LoggedScan {
     t: f64,
@@ -433,6 +420,9 @@ fn map(input: &Path, out: &Path, extra: &[&str]) -> Run {
 }
 
 mod bad_input;
+#[path = "../common/mod.rs"]
+mod common;
+use common::csail_dir;
 mod daemon;
 mod damaged_input;
 mod decode;

@@ -80,3 +80,23 @@ pub fn drifting_odometry(
 
 #[allow(unused_imports)]
 pub use clsmap::geometry::point_segment_distance;
+
+/// The directory of the real CSAIL log (`../shared/datasets/mit-csail`
+/// beside the repository), or `None` when it is missing: the tests that
+/// need it are skipped on a machine without it, saying so, but fail under
+/// CI (`CI` set, and not `false` or `0`), where a silent skip would pass
+/// them untested.
+pub fn csail_dir() -> Option<std::path::PathBuf> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/datasets/mit-csail");
+    if dir.join("mit-csail.clf").is_file() && dir.join("mit-csail.relations").is_file() {
+        return Some(dir);
+    }
+    let missing = format!(
+        "CSAIL dataset not found at {} (expected mit-csail.clf and mit-csail.relations)",
+        dir.display()
+    );
+    let under_ci = std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false" && v != "0");
+    assert!(!under_ci, "{missing}: CI must run the tests that need it");
+    eprintln!("SKIPPED: {missing}");
+    None
+}
