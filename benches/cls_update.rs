@@ -16,6 +16,7 @@
 use std::hint::black_box;
 
 use clsmap::geometry::{ExtractionConfig, Pose2, RangeScan, extract_lines};
+use clsmap::map::SegmentMap;
 use clsmap::map::cls::{ClsMap, ClsMapConfig};
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
 use criterion::{BatchSize, BenchmarkId, Criterion, criterion_group, criterion_main};
@@ -86,12 +87,13 @@ fn bench_growth(c: &mut Criterion, name: &str, scene: &Scene, config: ClsMapConf
     let mut group = c.benchmark_group(format!("cls_update/{name}"));
     let mut rng = Rng::new(7);
     let mut map = ClsMap::new(config);
+    let mut walls = SegmentMap::default();
     let mut next = 0;
     for target in SIZES {
         while map.len() < target && next + 1 < scene.poses.len() {
             let (lines, scan) = observe(scene, &scene.poses[next], &mut rng);
             // A scan the map cannot use is skipped, as the pipeline would.
-            let _ = map.update(&lines, &scan, scene.poses[next], COV);
+            let _ = map.update(&mut walls, &lines, &scan, scene.poses[next], COV);
             next += 1;
         }
         // The measured scan revisits the newest part of the map (a little
@@ -100,13 +102,13 @@ fn bench_growth(c: &mut Criterion, name: &str, scene: &Scene, config: ClsMapConf
         let pose = last.compose(&Pose2::new(0.2, 0.05, 0.1));
         let (lines, scan) = observe(scene, &pose, &mut rng);
         let segments = map.len();
-        let mut probe = map.clone();
-        let stats = probe.update(&lines, &scan, pose, COV);
+        let mut probe = (map.clone(), walls.clone());
+        let stats = probe.0.update(&mut probe.1, &lines, &scan, pose, COV);
         eprintln!("{name}: {segments} segments, update of the measured scan: {stats:?}");
         group.bench_with_input(BenchmarkId::from_parameter(segments), &segments, |b, _| {
             b.iter_batched(
-                || map.clone(),
-                |mut m| black_box(m.update(&lines, &scan, pose, COV)),
+                || (map.clone(), walls.clone()),
+                |(mut m, mut w)| black_box(m.update(&mut w, &lines, &scan, pose, COV)),
                 BatchSize::LargeInput,
             )
         });

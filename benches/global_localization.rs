@@ -18,6 +18,7 @@ use std::hint::black_box;
 use clsmap::geometry::{CogLine, ExtractionConfig, Pose2, extract_lines};
 use clsmap::input::open_log;
 use clsmap::localize::global::{GlobalConfig, GlobalMap, disambiguate, global_localize};
+use clsmap::map::SegmentMap;
 use clsmap::map::cls::{ClsMap, ClsMapConfig};
 use clsmap::pipeline::Mapper;
 use clsmap::pipeline::config::MapperConfig;
@@ -33,6 +34,7 @@ fn room_lines(world: &World) -> Vec<CogLine> {
     let ecfg = ExtractionConfig::default();
     let mut rng = Rng::new(3);
     let mut map = ClsMap::new(ClsMapConfig::default());
+    let mut walls = SegmentMap::default();
     for w in waypoints.windows(2) {
         let (a, b) = (w[0], w[1]);
         let heading = (b[1] - a[1]).atan2(b[0] - a[0]);
@@ -42,7 +44,7 @@ fn room_lines(world: &World) -> Vec<CogLine> {
             let pose = Pose2::new(a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]), heading);
             let scan = cast_scan(world, &pose, &spec, 0.0, &mut rng);
             let lines = extract_lines(&scan, &Pose2::IDENTITY, &ecfg);
-            let _ = map.update(&lines, &scan, pose, COV);
+            let _ = map.update(&mut walls, &lines, &scan, pose, COV);
         }
     }
     map.actual_segments().map(|s| s.line).collect()

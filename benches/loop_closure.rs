@@ -122,10 +122,10 @@ fn bench_loop_closure(c: &mut Criterion) {
             BatchSize::LargeInput,
         )
     });
-    group.bench_function("rebuild CLS map from 1,000 keyframes", |b| {
+    group.bench_function("rebuild walls and CLS map from 1,000 keyframes", |b| {
         b.iter_batched(
             || kg.clone(),
-            |mut kg| black_box(kg.rebuild_cls(config.cls_map()).1),
+            |mut kg| black_box(kg.rebuild_maps(config.map, config.cls_map()).2),
             BatchSize::LargeInput,
         )
     });

@@ -10,6 +10,7 @@
 mod common;
 
 use clsmap::geometry::{ExtractionConfig, Pose2, extract_lines, scan_points};
+use clsmap::map::SegmentMap;
 use clsmap::map::cls::{
     ClsError, ClsMap, ClsMapConfig, GridConfig, LocalMapConfig, SegmentMode, StoreError,
     occupancy_grid,
@@ -54,6 +55,7 @@ struct Run {
 
 fn drive(world: &World, poses: &[Pose2], seed: u64) -> Run {
     let mut map = ClsMap::new(config());
+    let mut walls = SegmentMap::default();
     let spec = ScanSpec::lms200_half_degree(0.005);
     let ecfg = ExtractionConfig::default();
     let mut rng = Rng::new(seed);
@@ -68,7 +70,7 @@ fn drive(world: &World, poses: &[Pose2], seed: u64) -> Run {
                 .into_iter()
                 .map(|p| pose.transform_point(p)),
         );
-        if let Ok(stats) = map.update(&lines, &scan, *pose, COV) {
+        if let Ok(stats) = map.update(&mut walls, &lines, &scan, *pose, COV) {
             updates += 1;
             clipped += usize::from(stats.clipped);
         }
@@ -341,6 +343,7 @@ proptest::proptest! {
             world.add_box([x, y], [hx, hy], a);
         }
         let mut map = ClsMap::new(ClsMapConfig { clip_to_window: clip, ..config() });
+        let mut walls = SegmentMap::default();
         let spec = ScanSpec::lms200_half_degree(0.01);
         let ecfg = ExtractionConfig::default();
         let mut rng = Rng::new(seed);
@@ -352,7 +355,7 @@ proptest::proptest! {
             pose.y = pose.y.clamp(0.5, 7.5);
             let scan = cast_scan(&world, &pose.compose(&mount()), &spec, 0.0, &mut rng);
             let lines = extract_lines(&scan, &mount(), &ecfg);
-            let result = map.update(&lines, &scan, pose, COV);
+            let result = map.update(&mut walls, &lines, &scan, pose, COV);
             proptest::prop_assert!(
                 !matches!(result, Err(ClsError::Invariant(_) | ClsError::LostHole | ClsError::Region(_))),
                 "{:?}",

@@ -205,7 +205,7 @@ fn the_live_view_serves_the_running_daemon_to_scripts() {
     let (code, map) = get(address, "/api/map");
     assert_eq!(code, 200);
     let loaded = clsmap::map::file::decode(&map).unwrap();
-    assert_eq!(loaded.version, 2);
+    assert_eq!(loaded.version, 3);
     assert!(loaded.contents.cls.actual_segments().count() > 5);
 
     // Control only with the token.

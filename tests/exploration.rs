@@ -19,6 +19,7 @@ use clsmap::explore::{
     plan_path,
 };
 use clsmap::geometry::{ExtractionConfig, Pose2, extract_lines};
+use clsmap::map::SegmentMap;
 use clsmap::map::cls::{ClsLoop, ClsMap, ClsMapConfig, ClsSegment, ClsShape, SegmentMode};
 use clsmap::render::picture;
 use clsmap::sim::{Rng, ScanSpec, World, WorldFile, cast_scan};
@@ -106,6 +107,7 @@ fn reachable_cells(world: &World, start: [f64; 2], cell: f64) -> Vec<[f64; 2]> {
 struct Explorer<'a> {
     world: &'a World,
     map: ClsMap,
+    walls: SegmentMap,
     pose: Pose2,
     rng: Rng,
     spec: ScanSpec,
@@ -123,6 +125,7 @@ impl<'a> Explorer<'a> {
         let mut e = Explorer {
             world,
             map: ClsMap::new(ClsMapConfig::default()),
+            walls: SegmentMap::default(),
             pose: start,
             rng: Rng::new(seed),
             spec: ScanSpec::lms200_half_degree(0.01),
@@ -148,7 +151,11 @@ impl<'a> Explorer<'a> {
             &mut self.rng,
         );
         let lines = extract_lines(&scan, &mount, &self.ecfg);
-        if self.map.update(&lines, &scan, self.pose, COV).is_err() {
+        if self
+            .map
+            .update(&mut self.walls, &lines, &scan, self.pose, COV)
+            .is_err()
+        {
             self.failed_updates += 1;
         }
         self.map.check_invariants().unwrap();

@@ -11,6 +11,7 @@ use clsmap::geometry::{CogLine, ExtractionConfig, Pose2, extract_lines, wrap_ang
 use clsmap::localize::global::{
     GlobalConfig, GlobalMap, GlobalResult, disambiguate, global_localize,
 };
+use clsmap::map::SegmentMap;
 use clsmap::map::cls::{ClsMap, ClsMapConfig};
 use clsmap::sim::{ROOM_WITH_BOXES_TOUR, Rng, ScanSpec, World, cast_scan};
 use common::{path, point_segment_distance as distance_to_segment};
@@ -24,13 +25,14 @@ const SIGMA: f64 = 0.01;
 /// map frame is the world frame).
 fn build_map(world: &World, poses: &[Pose2], seed: u64) -> ClsMap {
     let mut map = ClsMap::new(ClsMapConfig::default());
+    let mut walls = SegmentMap::default();
     let spec = ScanSpec::lms200_half_degree(SIGMA);
     let ecfg = ExtractionConfig::default();
     let mut rng = Rng::new(seed);
     for pose in poses {
         let scan = cast_scan(world, pose, &spec, 0.0, &mut rng);
         let lines = extract_lines(&scan, &Pose2::IDENTITY, &ecfg);
-        let _ = map.update(&lines, &scan, *pose, COV);
+        let _ = map.update(&mut walls, &lines, &scan, *pose, COV);
     }
     map.check_invariants().unwrap();
     map

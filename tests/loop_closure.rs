@@ -225,9 +225,29 @@ fn the_rebuild_from_keyframes_equals_the_incremental_maps() {
         walls.segments().collect::<Vec<_>>(),
         mapper.map().segments().collect::<Vec<_>>()
     );
-    let (cls, refused) = graph.rebuild_cls(config.cls_map());
+    let (both, cls, refused) = graph.rebuild_maps(config.map, config.cls_map());
+    assert_eq!(
+        both.segments().collect::<Vec<_>>(),
+        mapper.map().segments().collect::<Vec<_>>()
+    );
     assert_eq!(refused, mapper.summary().cls_rejected);
     assert_eq!(cls.items(), mapper.cls_map().items());
+    // Every wall piece of the CLS map names a standing wall and lies on
+    // it (a piece the updates' windows last reached before its wall was
+    // fused again keeps the line it was settled on, a few mm away).
+    let pieces: Vec<_> = cls.actual_segments().collect();
+    assert!(pieces.len() > 10);
+    for piece in pieces {
+        let wall = piece
+            .wall
+            .and_then(|w| both.wall(w))
+            .expect("a standing wall");
+        let off = wall
+            .distance_to_point(piece.start())
+            .max(wall.distance_to_point(piece.end()));
+        let turn = clsmap::geometry::wrap_angle(wall.theta - piece.line.theta).abs();
+        assert!(off < 0.02 && turn < 0.01, "{piece:?} on {wall:?}");
+    }
 }
 
 /// Optimisations off the real-time loop: on the long loop with odometry
@@ -326,7 +346,7 @@ fn a_saved_map_reads_back_and_rebuilds_from_its_keyframes() {
     let out = std::env::temp_dir().join(format!("clsmap-map-file-{}", std::process::id()));
     write_outputs(&out, &mapper, false).unwrap();
     let loaded = clsmap::map::file::load(&out.join("map.json")).unwrap();
-    assert_eq!(loaded.version, 2);
+    assert_eq!(loaded.version, 3);
     let stored = mapper.contents();
     let c = loaded.contents;
     // The CLS map keeps its geometry (not the scan point counts).
@@ -364,8 +384,11 @@ fn a_saved_map_reads_back_and_rebuilds_from_its_keyframes() {
             .collect::<Vec<_>>()
     );
     assert_eq!(
-        graph.rebuild_cls(config.cls_map()).0.items(),
-        original.rebuild_cls(config.cls_map()).0.items()
+        graph.rebuild_maps(config.map, config.cls_map()).1.items(),
+        original
+            .rebuild_maps(config.map, config.cls_map())
+            .1
+            .items()
     );
 
     // Extend: the first keyframe seen again, from a pose 0.3 m and 0.05 rad

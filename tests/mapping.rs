@@ -294,7 +294,7 @@ fn run_offline_mapping_writes_trajectory_and_segments() {
     // One file holds the map: walls, keyframes and the CLS map; no
     // segments.json beside it.
     let loaded = clsmap::map::file::load(&out.join("map.json")).unwrap();
-    assert_eq!(loaded.version, 2);
+    assert_eq!(loaded.version, 3);
     assert_eq!(loaded.contents.walls.len(), summary.segments);
     assert_eq!(loaded.contents.keyframes.len(), summary.keyframes);
     assert_eq!(loaded.contents.cls.loops().count(), summary.cls_loops);

@@ -205,15 +205,7 @@ impl OptimisationJob {
         let started = Instant::now();
         let outcome = report.map(|report| {
             let poses = self.graph.poses().to_vec();
-            let mut walls = SegmentMap::new(self.fusion);
-            let mut cls = ClsMap::new(self.cls);
-            for (kf, pose) in self.keyframes.iter().zip(&poses) {
-                walls.update(&kf.lines, pose, &kf.covariance);
-                if let Some(region) = &kf.region {
-                    // A keyframe the CLS map refuses leaves it as it was.
-                    let _ = cls.add_keyframe(&kf.lines, region, *pose, kf.covariance);
-                }
-            }
+            let (walls, cls, _) = build_maps(&self.keyframes, &poses, self.fusion, self.cls);
             (poses, report, walls, cls)
         });
         OptimisationResult {
@@ -797,28 +789,40 @@ impl KeyframeGraph {
         let started = Instant::now();
         let mut map = SegmentMap::new(config);
         for (kf, pose) in self.keyframes.iter().zip(self.graph.poses()) {
-            map.update(&kf.lines, pose, &kf.covariance);
+            kf.add_to(pose, &mut map, None);
         }
         self.stats.rebuild_s += started.elapsed().as_secs_f64();
         map
     }
 
-    /// The CLS map of every keyframe in keyframe order at the current
-    /// poses, and how many keyframes it refused.
-    pub fn rebuild_cls(&mut self, config: ClsMapConfig) -> (ClsMap, usize) {
+    /// The walls and the CLS map of every keyframe in keyframe order at
+    /// the current poses (the CLS map's wall pieces on those walls), and
+    /// how many keyframes the CLS map refused.
+    pub fn rebuild_maps(
+        &mut self,
+        fusion: SegmentMapConfig,
+        cls: ClsMapConfig,
+    ) -> (SegmentMap, ClsMap, usize) {
         let started = Instant::now();
-        let mut cls = ClsMap::new(config);
-        let mut refused = 0;
-        for (kf, pose) in self.keyframes.iter().zip(self.graph.poses()) {
-            let grown = match &kf.region {
-                Some(region) => cls
-                    .add_keyframe(&kf.lines, region, *pose, kf.covariance)
-                    .is_ok(),
-                None => false,
-            };
-            refused += usize::from(!grown);
-        }
+        let built = build_maps(&self.keyframes, self.graph.poses(), fusion, cls);
         self.stats.rebuild_s += started.elapsed().as_secs_f64();
-        (cls, refused)
+        built
     }
+}
+
+/// The walls and the CLS map of `keyframes` at `poses`, in keyframe
+/// order, and how many keyframes the CLS map refused.
+fn build_maps(
+    keyframes: &[Arc<Keyframe>],
+    poses: &[Pose2],
+    fusion: SegmentMapConfig,
+    cls: ClsMapConfig,
+) -> (SegmentMap, ClsMap, usize) {
+    let mut walls = SegmentMap::new(fusion);
+    let mut map = ClsMap::new(cls);
+    let mut refused = 0;
+    for (kf, pose) in keyframes.iter().zip(poses) {
+        refused += usize::from(!kf.add_to(pose, &mut walls, Some(&mut map)));
+    }
+    (walls, map, refused)
 }

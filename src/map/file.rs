@@ -1,12 +1,15 @@
-//! `map.json`, version 2: everything a map is made of, in one file.
+//! `map.json`, version 3: everything a map is made of, in one file.
 //!
 //! ```json
-//! {"format":"clsmap-map","version":2,"frame":"map","created_by":"clsmap 0.1.0",
+//! {"format":"clsmap-map","version":3,"frame":"map","created_by":"clsmap 0.1.0",
 //!  "payload":{"segments":[...],"walls":[...],"keyframes":[...],"edges":[...]},
 //!  "checksum":123456789}
 //! ```
 //!
-//! - `segments`: the CLS map's CLSM_Item list, as in version 1.
+//! - `segments`: the CLS map's CLSM_Item list, as in version 1; a wall
+//!   piece also names the wall it lies on (`wall`, an id in `walls`).
+//!   That is all version 3 adds to version 2, whose files still load
+//!   (their pieces name no wall).
 //! - `walls`: the fused wall segments local localization matched against
 //!   (`id`, `observations`, `line`); what `segments.json` held before.
 //! - `keyframes`: per keyframe its time, pose, pose covariance, path
@@ -44,7 +47,9 @@ use crate::geometry::{CogLine, Pose2};
 /// The file's `format` tag.
 pub const FORMAT: &str = "clsmap-map";
 /// The version this build writes.
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
+/// The version before wall pieces named their walls; read as well.
+const VERSION_2: u32 = 2;
 
 /// One keyframe as stored.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -392,7 +397,7 @@ pub fn decode_with(text: &str, check: ChecksumCheck) -> Result<LoadedMap, StoreE
     if probe.format != FORMAT && probe.format != store::FORMAT {
         return Err(StoreError::Format(probe.format));
     }
-    if probe.version != VERSION {
+    if probe.version != VERSION && probe.version != VERSION_2 {
         return Err(StoreError::Version {
             found: probe.version,
         });
@@ -410,7 +415,7 @@ pub fn decode_with(text: &str, check: ChecksumCheck) -> Result<LoadedMap, StoreE
     let contents = checked_contents(cls, payload)?;
     Ok(LoadedMap {
         contents,
-        version: VERSION,
+        version: probe.version,
         checksum_mismatch,
     })
 }
@@ -459,6 +464,17 @@ fn checked_contents(cls: ClsMap, payload: Payload) -> Result<MapContents, StoreE
         if !ids.insert(w.id) {
             return Err(inconsistent(format!("wall id {} appears twice", w.id.0)));
         }
+    }
+    if let Some((i, wall)) = payload
+        .segments
+        .iter()
+        .enumerate()
+        .find_map(|(i, r)| r.wall.filter(|w| !ids.contains(w)).map(|w| (i, w)))
+    {
+        return Err(inconsistent(format!(
+            "segment {i} lies on wall {}, which the file does not hold",
+            wall.0
+        )));
     }
     let n = payload.keyframes.len();
     let mut keyframes = Vec::with_capacity(n);
@@ -544,11 +560,28 @@ mod tests {
     use crate::map::cls::store::crc32;
     use crate::map::cls::{ClsLoop, ClsSegment, ClsShape};
 
+    /// The wall the square's first side lies on, id 3 in [`contents`].
+    fn bottom_wall() -> CogLine {
+        CogLine::from_centre(0.0, [1.5, 0.0], -1.5, 1.5, 0.005, 0.002, 40)
+    }
+
     fn square() -> ClsMap {
         let pts = [[0.0, 0.0], [3.0, 0.0], [3.0, 2.0], [0.0, 2.0]];
         let outer = ClsLoop::new(
             (0..4)
-                .map(|i| ClsSegment::virtual_between(pts[i], pts[(i + 1) % 4]))
+                .map(|i| match i {
+                    // As stored: a piece's point count is not kept.
+                    0 => ClsSegment::actual_on(
+                        &CogLine {
+                            n_points: 0,
+                            ..bottom_wall()
+                        },
+                        Some(crate::geometry::SegmentId(3)),
+                        pts[0],
+                        pts[1],
+                    ),
+                    _ => ClsSegment::virtual_between(pts[i], pts[(i + 1) % 4]),
+                })
                 .collect(),
         );
         let shapes = vec![ClsShape {
@@ -559,7 +592,7 @@ mod tests {
     }
 
     fn contents() -> MapContents {
-        let wall = CogLine::from_centre(0.0, [1.5, 0.0], -1.5, 1.5, 0.005, 0.002, 40);
+        let wall = bottom_wall();
         let keyframe = |t: f64| Keyframe {
             t,
             lines: vec![wall],
@@ -608,15 +641,44 @@ mod tests {
     }
 
     #[test]
-    fn version_2_round_trips_every_part() {
+    fn version_3_round_trips_every_part() {
         let c = contents();
         let back = decode(&encode(&c).unwrap()).unwrap();
-        assert_eq!(back.version, 2);
+        assert_eq!(back.version, 3);
         assert_eq!(back.contents.cls.items(), c.cls.items());
+        assert_eq!(
+            back.contents.cls.actual_segments().next().unwrap().wall,
+            Some(crate::geometry::SegmentId(3))
+        );
         assert_eq!(back.contents.walls, c.walls);
         assert_eq!(back.contents.poses, c.poses);
         assert_eq!(back.contents.edges, c.edges);
         assert_eq!(*back.contents.keyframes[1], *c.keyframes[1]);
+    }
+
+    #[test]
+    fn version_2_files_load_with_wall_pieces_naming_no_wall() {
+        let text = encode(&contents()).unwrap();
+        let raw = payload_of(&text).replacen(",\"wall\":3", "", 1);
+        let v2 = with_payload(&raw).replacen("\"version\":3", "\"version\":2", 1);
+        let back = decode(&v2).unwrap();
+        assert_eq!(back.version, 2);
+        let piece = back.contents.cls.actual_segments().next().unwrap();
+        assert_eq!(
+            (piece.wall, piece.line),
+            (None, contents().cls.actual_segments().next().unwrap().line)
+        );
+        assert_eq!(back.contents.walls, contents().walls);
+    }
+
+    #[test]
+    fn a_wall_piece_naming_a_wall_the_file_lacks_is_refused() {
+        let text = encode(&contents()).unwrap();
+        let raw = payload_of(&text).replacen("\"wall\":3", "\"wall\":9", 1);
+        match decode(&with_payload(&raw)) {
+            Err(StoreError::Inconsistent(why)) => assert!(why.contains("wall 9"), "{why}"),
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]
@@ -719,13 +781,13 @@ mod tests {
             decode(&forged),
             Err(StoreError::Checksum { stored: 0, .. })
         ));
-        let v3 = text.replacen("\"version\":2", "\"version\":3", 1);
-        assert!(matches!(decode(&v3), Err(StoreError::Version { found: 3 })));
+        let v4 = text.replacen("\"version\":3", "\"version\":4", 1);
+        assert!(matches!(decode(&v4), Err(StoreError::Version { found: 4 })));
         let foreign = text.replacen("clsmap-map", "someone-else", 1);
         assert!(matches!(decode(&foreign), Err(StoreError::Format(_))));
 
         let raw = payload_of(&text);
-        assert_eq!(decode(&with_payload(raw)).unwrap().version, 2);
+        assert_eq!(decode(&with_payload(raw)).unwrap().version, 3);
         let bad_edge = with_payload(&raw.replacen("\"to\":1", "\"to\":9", 1));
         match decode(&bad_edge) {
             Err(StoreError::Inconsistent(why)) => assert!(why.contains("edge 0"), "{why}"),

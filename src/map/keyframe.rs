@@ -8,7 +8,8 @@
 //! less time.
 
 use crate::geometry::{CogLine, Pose2, wrap_angle};
-use crate::map::cls::LocalRegion;
+use crate::map::SegmentMap;
+use crate::map::cls::{ClsMap, LocalRegion};
 use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 
@@ -29,6 +30,23 @@ pub struct Keyframe {
     /// Path driven from the first keyframe to this one, through every
     /// keyframe taken, kept or merged (m).
     pub travelled: f64,
+}
+
+impl Keyframe {
+    /// Adds this keyframe at `pose` (map frame) to the wall store `walls`
+    /// and then, when given, to the CLS map `cls`, its wall pieces on
+    /// those walls: the one step every build of the map repeats, in
+    /// keyframe order. Returns whether the CLS map took it (a keyframe
+    /// without a region, or one the CLS map refuses, leaves it as it was).
+    pub fn add_to(&self, pose: &Pose2, walls: &mut SegmentMap, cls: Option<&mut ClsMap>) -> bool {
+        let ids = walls.update(&self.lines, pose, &self.covariance).walls;
+        match (cls, &self.region) {
+            (Some(cls), Some(region)) => cls
+                .add_keyframe(walls, &ids, region, *pose, self.covariance)
+                .is_ok(),
+            _ => false,
+        }
+    }
 }
 
 /// Keyframe thresholds.

@@ -8,4 +8,6 @@ pub mod segment_map;
 
 pub use file::{LoadedMap, MapContents};
 pub use keyframe::{Edge, EdgeKind, Keyframe, KeyframeConfig, KeyframePolicy};
-pub use segment_map::{MapSegment, SegmentMap, SegmentMapConfig, UpdateStats, blur_by_pose, fuse};
+pub use segment_map::{
+    MapSegment, SegmentMap, SegmentMapConfig, UpdateStats, WallUpdate, blur_by_pose, fuse,
+};

@@ -71,6 +71,15 @@ pub struct UpdateStats {
     pub merged: usize,
 }
 
+/// What one keyframe did to the walls: the counts, and the wall each of
+/// its lines went into (fused, added, or the wall that absorbed that one
+/// while bridging), in the order of the lines given.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct WallUpdate {
+    pub stats: UpdateStats,
+    pub walls: Vec<SegmentId>,
+}
+
 /// One wall of the map, as `map.json` stores it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct MapSegment {
@@ -87,6 +96,9 @@ pub struct SegmentMap {
     index: SegmentIndex,
     /// Keyframes that contributed, per id (`SegmentId.0`); 0 once removed.
     observations: Vec<u32>,
+    /// The wall that absorbed each wall bridged into another (by id;
+    /// `u32::MAX` for none), so a reference to it still finds its wall.
+    absorbed_into: Vec<u32>,
 }
 
 /// `(θ, offset)` variances a line gains from the pose covariance `cov`
@@ -263,6 +275,7 @@ impl SegmentMap {
             config,
             index: SegmentIndex::new(),
             observations: Vec::new(),
+            absorbed_into: Vec::new(),
         }
     }
 
@@ -296,6 +309,38 @@ impl SegmentMap {
         self.observations[i] = count;
     }
 
+    /// The wall `id` is now: itself while it stands, else the wall that
+    /// absorbed it (followed through later merges); `None` for an id this
+    /// map never held.
+    pub fn resolve(&self, id: SegmentId) -> Option<SegmentId> {
+        let mut id = id;
+        // Each merge absorbs a standing wall into another standing one, so
+        // the chain is acyclic and shorter than the number of walls.
+        for _ in 0..=self.absorbed_into.len() {
+            if self.index.get(id).is_some() {
+                return Some(id);
+            }
+            match self.absorbed_into.get(id.0 as usize) {
+                Some(&next) if next != u32::MAX => id = SegmentId(next),
+                _ => return None,
+            }
+        }
+        None
+    }
+
+    /// The line of wall `id` (map frame), if it stands.
+    pub fn wall(&self, id: SegmentId) -> Option<&CogLine> {
+        self.index.get(id)
+    }
+
+    fn set_absorbed(&mut self, gone: SegmentId, into: SegmentId) {
+        let i = gone.0 as usize;
+        if self.absorbed_into.len() <= i {
+            self.absorbed_into.resize(i + 1, u32::MAX);
+        }
+        self.absorbed_into[i] = into.0;
+    }
+
     /// All segments in id order.
     pub fn segments(&self) -> impl Iterator<Item = MapSegment> + '_ {
         self.index.iter().map(|(id, line)| MapSegment {
@@ -322,6 +367,7 @@ impl SegmentMap {
             config,
             index,
             observations: Vec::new(),
+            absorbed_into: Vec::new(),
         };
         for w in walls {
             map.set_observations(w.id, w.observations);
@@ -343,14 +389,15 @@ impl SegmentMap {
     /// bridging two pieces of a wall); the rest are added. Scan lines are
     /// matched only against lines that existed before this scan, so two
     /// pieces of one scan are never joined across the gap the extractor
-    /// saw between them.
+    /// saw between them. Returns the counts and the wall of each line.
     pub fn update(
         &mut self,
         local_lines: &[CogLine],
         pose: &Pose2,
         pose_cov: &[[f64; 3]; 3],
-    ) -> UpdateStats {
+    ) -> WallUpdate {
         let mut stats = UpdateStats::default();
+        let mut walls = Vec::with_capacity(local_lines.len());
         let mut new_lines = Vec::new();
         let gates = self.config.fusion;
         let mut candidates: Vec<(SegmentId, f64)> = Vec::new();
@@ -366,9 +413,12 @@ impl SegmentMap {
                 .first()
                 .and_then(|&(target, _)| Some((target, fuse(self.index.get(target)?, &observed)?)));
             let Some((target, fused)) = fused else {
-                new_lines.push(observed);
+                // Numbered once the new walls are in.
+                walls.push(SegmentId(u32::MAX));
+                new_lines.push((walls.len() - 1, observed));
                 continue;
             };
+            walls.push(target);
             let mut fused = self.floor_sigmas(fused);
             let mut count = self.observations(target).saturating_add(1);
             // Bridging: the fused line may now reach other pieces of the
@@ -398,18 +448,25 @@ impl SegmentMap {
                 }
                 count = count.saturating_add(self.observations(other));
                 self.set_observations(other, 0);
+                self.set_absorbed(other, target);
                 stats.merged += 1;
             }
             self.index.update(target, fused);
             self.set_observations(target, count);
             stats.fused += 1;
         }
-        for line in new_lines {
+        for (k, line) in new_lines {
             let id = self.index.insert(self.floor_sigmas(line));
             self.set_observations(id, 1);
+            walls[k] = id;
             stats.added += 1;
         }
-        stats
+        // A line fused into a wall that a later line of this scan bridged
+        // into another went there too.
+        for id in &mut walls {
+            *id = self.resolve(*id).unwrap_or(*id);
+        }
+        WallUpdate { stats, walls }
     }
 }
 
@@ -461,9 +518,9 @@ mod tests {
         assert!(f.start[0] < 0.01 && f.end[0] > 4.99);
 
         let mut map = SegmentMap::new(SegmentMapConfig::default());
-        let s = map.update(&[a], &Pose2::IDENTITY, &NO_COV);
+        let s = map.update(&[a], &Pose2::IDENTITY, &NO_COV).stats;
         assert_eq!((s.added, s.fused), (1, 0));
-        let s = map.update(&[b], &Pose2::IDENTITY, &NO_COV);
+        let s = map.update(&[b], &Pose2::IDENTITY, &NO_COV).stats;
         assert_eq!((s.added, s.fused), (0, 1));
         assert_eq!(map.len(), 1);
         let seg = map.segments().next().unwrap();
@@ -486,13 +543,22 @@ mod tests {
         // Two pieces seen in one scan (never joined within that scan).
         let left = wall(0.0, 2.0, 3.0, 0.005, 0.003);
         let right = wall(2.6, 5.0, 3.0, 0.005, 0.003);
-        let s = map.update(&[left, right], &Pose2::IDENTITY, &NO_COV);
+        let s = map.update(&[left, right], &Pose2::IDENTITY, &NO_COV).stats;
         assert_eq!((s.added, s.merged), (2, 0));
         // A later scan sees the wall across the gap.
         let bridge = wall(1.5, 3.2, 3.01, 0.005, 0.003);
-        let s = map.update(&[bridge], &Pose2::IDENTITY, &NO_COV);
+        let before: Vec<SegmentId> = map.segments().map(|w| w.id).collect();
+        let update = map.update(&[bridge], &Pose2::IDENTITY, &NO_COV);
+        let s = update.stats;
         assert_eq!((s.fused, s.merged, s.added), (1, 1, 0), "{s:?}");
         assert_eq!(map.len(), 1);
+        // The absorbed piece's id leads to the wall that took it in.
+        let standing = map.segments().next().unwrap().id;
+        assert_eq!(update.walls, [standing]);
+        for id in before {
+            assert_eq!(map.resolve(id), Some(standing));
+        }
+        assert_eq!(map.resolve(SegmentId(99)), None);
         let seg = map.segments().next().unwrap();
         assert_eq!(seg.observations, 3);
         let (s0, s1) = seg.line.extent();
@@ -507,11 +573,13 @@ mod tests {
         let right = wall(2.9, 5.0, 3.0, 0.005, 0.003);
         map.update(&[left, right], &Pose2::IDENTITY, &NO_COV);
         // Extends the left piece but stops 0.6 m before the right one.
-        let s = map.update(
-            &[wall(1.0, 2.3, 3.0, 0.005, 0.003)],
-            &Pose2::IDENTITY,
-            &NO_COV,
-        );
+        let s = map
+            .update(
+                &[wall(1.0, 2.3, 3.0, 0.005, 0.003)],
+                &Pose2::IDENTITY,
+                &NO_COV,
+            )
+            .stats;
         assert_eq!((s.fused, s.merged), (1, 0));
         assert_eq!(map.len(), 2);
         assert_well_formed(&map);
@@ -529,8 +597,9 @@ mod tests {
             wall(0.5, 2.0, 2.0, 0.005, 0.003),
             wall(3.0, 5.0, 2.0, 0.005, 0.003),
         ];
-        let s = map.update(&pieces, &Pose2::IDENTITY, &NO_COV);
-        assert_eq!((s.fused, s.added), (2, 0));
+        let update = map.update(&pieces, &Pose2::IDENTITY, &NO_COV);
+        assert_eq!((update.stats.fused, update.stats.added), (2, 0));
+        assert_eq!(update.walls, [SegmentId(0), SegmentId(0)]);
         assert_eq!(map.len(), 1);
         assert_eq!(map.segments().next().unwrap().observations, 3);
     }
@@ -550,8 +619,9 @@ mod tests {
         );
         let other = wall(0.0, 4.0, 2.5, 0.005, 0.003);
         map.update(&[front], &Pose2::IDENTITY, &NO_COV);
-        let s = map.update(&[back, other], &Pose2::IDENTITY, &NO_COV);
-        assert_eq!(s.added, 2);
+        let update = map.update(&[back, other], &Pose2::IDENTITY, &NO_COV);
+        assert_eq!(update.stats.added, 2);
+        assert_eq!(update.walls, [SegmentId(1), SegmentId(2)]);
         assert_eq!(map.len(), 3);
     }
 

@@ -286,11 +286,19 @@ impl Mapper {
         self.graph.is_settled() && !self.graph.loop_search_pending() && !self.cls_stale
     }
 
-    /// Rebuilds the CLS map from the keyframes if a loop closure moved
-    /// them since it was grown.
+    /// Rebuilds the walls and the CLS map from the keyframes if a loop
+    /// closure moved them since the CLS map was grown (or it waits for its
+    /// one build at the end of a run): the CLS map's wall pieces name the
+    /// walls they lie on, so both come from one pass.
     pub fn refresh_cls_map(&mut self) {
         if self.cls_stale {
-            let (cls, refused) = self.graph.rebuild_cls(self.config.cls_map());
+            let (walls, cls, refused) = self
+                .graph
+                .rebuild_maps(self.config.map, self.config.cls_map());
+            // No keyframes, no walls from them: keep what was loaded.
+            if !self.graph.is_empty() {
+                self.map = walls;
+            }
             self.cls = cls;
             self.summary.cls_rejected = refused;
             self.cls_stale = false;
@@ -301,8 +309,10 @@ impl Mapper {
     /// the walls, and the keyframes (shared, not copied) with their poses
     /// and the pose graph's edges.
     pub fn contents(&self) -> MapContents {
+        let mut cls = self.cls.clone();
+        cls.resolve_walls(&self.map);
         MapContents {
-            cls: self.cls.clone(),
+            cls,
             walls: self.map.segments().collect(),
             keyframes: self.graph.keyframes().to_vec(),
             poses: self.graph.poses().to_vec(),
@@ -496,9 +506,10 @@ impl Mapper {
     /// the maps are rebuilt from the keyframes at their new poses.
     fn apply_correction(&mut self, c: &Correction) {
         self.follow_correction(c);
-        self.map = self.graph.rebuild_walls(self.config.map);
         self.cls_stale = true;
-        if !self.defer_cls_rebuild {
+        if self.defer_cls_rebuild {
+            self.map = self.graph.rebuild_walls(self.config.map);
+        } else {
             self.refresh_cls_map();
         }
     }
@@ -687,10 +698,7 @@ impl Mapper {
         } = applied;
         let poses = self.graph.poses();
         for (kf, pose) in self.graph.keyframes().iter().zip(poses).skip(covered) {
-            walls.update(&kf.lines, pose, &kf.covariance);
-            if let Some(region) = &kf.region {
-                let _ = cls.add_keyframe(&kf.lines, region, *pose, kf.covariance);
-            }
+            kf.add_to(pose, &mut walls, Some(&mut cls));
         }
         self.map = walls;
         if self.defer_cls_rebuild {
@@ -933,8 +941,9 @@ impl Mapper {
         let learns = self.mode != Some(MapMode::Localize);
         if may_update_map && learns && self.keyframes.is_keyframe(&outcome.pose) {
             let t = Instant::now();
-            trace_span!("map_update")
-                .in_scope(|| self.map.update(&self.lines, &outcome.pose, &cov));
+            let line_walls = trace_span!("map_update")
+                .in_scope(|| self.map.update(&self.lines, &outcome.pose, &cov))
+                .walls;
             self.clocks.map_update.add(t.elapsed());
             let t = Instant::now();
             let region = local_region(&self.lines, &record.scan, &self.cls.config().local);
@@ -942,7 +951,10 @@ impl Mapper {
             // takes this keyframe too.
             if !self.cls_stale {
                 let grown = trace_span!("cls_update").in_scope(|| match &region {
-                    Ok(local) => self.cls.add_keyframe(&self.lines, local, outcome.pose, cov),
+                    Ok(local) => {
+                        self.cls
+                            .add_keyframe(&self.map, &line_walls, local, outcome.pose, cov)
+                    }
                     Err(e) => Err(ClsError::Local(e.clone())),
                 });
                 if let Err(e) = grown {

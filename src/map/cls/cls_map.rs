@@ -7,8 +7,8 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::{CogLine, Pose2, RangeScan};
-use crate::map::{SegmentMapConfig, blur_by_pose};
+use crate::geometry::{CogLine, Pose2, RangeScan, SegmentId};
+use crate::map::{SegmentMap, SegmentMapConfig};
 
 use super::fusion::LineTable;
 use super::local::{LocalMapConfig, LocalMapError, LocalRegion, LocalSource, local_region};
@@ -224,14 +224,30 @@ impl ClsMap {
         check_loops(&self.shapes)
     }
 
-    /// Writes the map alone (no walls or keyframes) to `path` as
-    /// `map.json` (see [`crate::map::file`]), atomically.
+    /// Writes the map alone (no walls or keyframes, so its pieces name no
+    /// wall) to `path` as `map.json` (see [`crate::map::file`]),
+    /// atomically.
     pub fn save(&self, path: &Path) -> Result<(), StoreError> {
+        // Without the walls beside it, a piece names no wall.
+        let mut cls = self.clone();
+        cls.resolve_walls(&SegmentMap::default());
         let contents = crate::map::MapContents {
-            cls: self.clone(),
+            cls,
             ..Default::default()
         };
         crate::map::file::save(path, &contents)
+    }
+
+    /// Points every wall piece at the wall that now stands for its wall in
+    /// `walls` (a wall bridged into another leaves its id behind), or at
+    /// none if `walls` lost it; for a map about to be stored beside those
+    /// walls.
+    pub fn resolve_walls(&mut self, walls: &SegmentMap) {
+        for shape in &mut self.shapes {
+            for lp in std::iter::once(&mut shape.outer).chain(shape.holes.iter_mut()) {
+                lp.map_walls(|w| walls.resolve(w));
+            }
+        }
     }
 
     /// The same map under another configuration (for what it grows next).
@@ -251,35 +267,44 @@ impl ClsMap {
 
     /// Adds one scan: `lines` extracted from `scan` (robot frame, scan
     /// order), taken at `pose` (robot in the map frame) with covariance
-    /// `pose_cov` (x, y, θ; m², m·rad, rad²). Only the shapes whose bounding
-    /// boxes touch the scan's region take part; the rest stay untouched.
+    /// `pose_cov` (x, y, θ; m², m·rad, rad²). The lines go into the wall
+    /// store `walls` first, then the scan's region into this map, its wall
+    /// pieces on those walls. Only the shapes whose bounding boxes touch
+    /// the scan's region take part; the rest stay untouched.
     pub fn update(
         &mut self,
+        walls: &mut SegmentMap,
         lines: &[CogLine],
         scan: &RangeScan,
         pose: Pose2,
         pose_cov: [[f64; 3]; 3],
     ) -> Result<ClsUpdateStats, ClsError> {
         check_pose(&pose, &pose_cov)?;
+        let ids = walls.update(lines, &pose, &pose_cov).walls;
         let local = local_region(lines, scan, &self.config.local)?;
-        self.add_keyframe(lines, &local, pose, pose_cov)
+        self.add_keyframe(walls, &ids, &local, pose, pose_cov)
     }
 
-    /// [`update`](Self::update) with the scan's local region already built
-    /// (`local`, robot frame): what a rebuild from stored keyframes calls.
+    /// The update after the walls: `walls` already holds the keyframe's
+    /// lines, `line_walls` the wall each went into (as
+    /// [`SegmentMap::update`] gave them), `local` the scan's local region
+    /// (robot frame). What the mapper and a rebuild from stored keyframes
+    /// call.
     pub fn add_keyframe(
         &mut self,
-        lines: &[CogLine],
+        walls: &SegmentMap,
+        line_walls: &[SegmentId],
         local: &LocalRegion,
         pose: Pose2,
         pose_cov: [[f64; 3]; 3],
     ) -> Result<ClsUpdateStats, ClsError> {
         check_pose(&pose, &pose_cov)?;
-        self.add_region(&local.transformed(&pose), lines, pose, pose_cov)
+        self.add_region(walls, &local.transformed(&pose), line_walls)
     }
 
     /// The update after the local map is built: `local` is in the map
-    /// frame, its actual edges numbering `lines` (robot frame).
+    /// frame, its actual edges numbering `line_walls` (the walls of the
+    /// keyframe's lines in `walls`).
     ///
     /// Shapes whose bounding boxes miss a window around `local` are not
     /// touched, nor are the holes of touched shapes that miss it. Loops
@@ -289,10 +314,9 @@ impl ClsMap {
     /// degenerate case the whole loops are unioned instead.
     pub fn add_region(
         &mut self,
+        walls: &SegmentMap,
         local: &LocalRegion,
-        lines: &[CogLine],
-        pose: Pose2,
-        pose_cov: [[f64; 3]; 3],
+        line_walls: &[SegmentId],
     ) -> Result<ClsUpdateStats, ClsError> {
         let mut lb = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         for e in &local.edges {
@@ -343,7 +367,7 @@ impl ClsMap {
         let mut result = None;
         if try_window
             && let Some((shapes, stats)) =
-                self.windowed_union(local, lines, pose, pose_cov, &whole, &crossing, window_box)?
+                self.windowed_union(walls, local, line_walls, &whole, &crossing, window_box)?
         {
             let committed = self.with_far_holes(shapes, &far_holes)?;
             // Checked whole: the splice can disturb a loop away from the
@@ -356,11 +380,10 @@ impl ClsMap {
             Some(done) => done,
             None => {
                 let mut table = LineTable::default();
-                let subject = whole_contours(&near, &mut table);
+                let subject = whole_contours(&near, &mut table, walls);
                 let mut stats = ClsUpdateStats::default();
-                let merged = self.merge_local(
-                    subject, &mut table, local, lines, pose, pose_cov, &mut stats,
-                )?;
+                let merged =
+                    self.merge_local(subject, &mut table, walls, local, line_walls, &mut stats)?;
                 let committed = self.with_far_holes(to_shapes(&merged, &table), &far_holes)?;
                 // Refuse the update whole rather than keep an invalid map.
                 self.check_candidate(&touched, &committed)?;
@@ -459,13 +482,11 @@ impl ClsMap {
 
     /// The union with the crossing loops clipped to the window; `None` if
     /// the clipping or the splice meets a degenerate case.
-    #[allow(clippy::too_many_arguments)]
     fn windowed_union(
         &self,
+        walls: &SegmentMap,
         local: &LocalRegion,
-        lines: &[CogLine],
-        pose: Pose2,
-        pose_cov: [[f64; 3]; 3],
+        line_walls: &[SegmentId],
         whole: &[&ClsLoop],
         crossing: &[&ClsLoop],
         window_box: ([f64; 2], [f64; 2]),
@@ -477,15 +498,13 @@ impl ClsMap {
             crossing,
             self.config.region.grid,
         )?;
-        let Some(clipped) = window.clip(crossing, &mut table) else {
+        let Some(clipped) = window.clip(crossing, &mut table, walls) else {
             return Ok(None);
         };
-        let mut subject = whole_contours(whole, &mut table);
+        let mut subject = whole_contours(whole, &mut table, walls);
         subject.extend(clipped);
         let mut stats = ClsUpdateStats::default();
-        let result = self.merge_local(
-            subject, &mut table, local, lines, pose, pose_cov, &mut stats,
-        )?;
+        let result = self.merge_local(subject, &mut table, walls, local, line_walls, &mut stats)?;
         if !window.holds(&result) {
             return Ok(None);
         }
@@ -501,18 +520,16 @@ impl ClsMap {
         Ok(group_loops(loops).map(|shapes| (shapes, stats)))
     }
 
-    /// Fusion and union: the scan's lines fused into the table's walls,
-    /// the boundaries settled onto the fused lines, the local region
+    /// The union: the keyframe's walls taken into the table, the
+    /// boundaries settled onto the walls that moved, the local region
     /// unioned with `subject`, walls recovered and slivers cleaned.
-    #[allow(clippy::too_many_arguments)]
     fn merge_local(
         &self,
         mut subject: Vec<Vec<RegionEdge>>,
         table: &mut LineTable,
+        walls: &SegmentMap,
         local: &LocalRegion,
-        lines: &[CogLine],
-        pose: Pose2,
-        pose_cov: [[f64; 3]; 3],
+        line_walls: &[SegmentId],
         stats: &mut ClsUpdateStats,
     ) -> Result<Vec<RegionShape>, ClsError> {
         stats.touched_segments = subject.iter().map(Vec::len).sum();
@@ -523,17 +540,14 @@ impl ClsMap {
                 LocalSource::Actual(i) => Some(i),
                 LocalSource::Virtual => None,
             })
-            .filter(|&i| i < lines.len())
+            .filter(|&i| i < line_walls.len())
             .collect();
         used.sort_unstable();
         used.dedup();
-        let observed: Vec<CogLine> = used
-            .iter()
-            .map(|&i| blur_by_pose(&lines[i], &pose, &pose_cov))
-            .collect();
-        let (numbers, fused) = table.observe(&observed, &self.config.fusion);
+        let seen: Vec<SegmentId> = used.iter().map(|&i| line_walls[i]).collect();
+        let (numbers, fused) = table.add_keyframe_walls(&seen, walls);
         stats.fused = fused;
-        stats.added = observed.len() - fused;
+        stats.added = seen.len() - fused;
         let mut clip: Vec<RegionEdge> = local
             .edges
             .iter()
@@ -544,8 +558,8 @@ impl ClsMap {
                     LocalSource::Actual(i) => used
                         .binary_search(&i)
                         .ok()
-                        .and_then(|k| numbers.get(k))
-                        .map_or(EdgeOrigin::Virtual, |&n| EdgeOrigin::Actual(n)),
+                        .and_then(|k| numbers.get(k).copied().flatten())
+                        .map_or(EdgeOrigin::Virtual, EdgeOrigin::Actual),
                     LocalSource::Virtual => EdgeOrigin::Virtual,
                 },
             })

@@ -1,44 +1,129 @@
-//! Fusion of a scan's actual segments into the actual segments on the CLS
-//! boundary, and the repair of the loops around the moved lines.
+//! The walls of one CLS update, and the repair of the loops around the
+//! walls that moved.
 //!
-//! The fusion itself is the segment map's ([`fuse`], after
-//! [`blur_by_pose`] has moved the scan line into the map frame); this module
-//! only decides which boundary line each scan line fuses with (the best
-//! corresponding one, [`SegmentIndex::best_match`]) and moves the boundary
-//! vertices onto the fused lines so every loop still closes: a vertex
-//! between two actual segments goes to the intersection of their lines (if
-//! that is near), otherwise it is projected onto the moved line, and both
-//! neighbours share the new vertex.
-//!
-//! [`blur_by_pose`]: crate::map::blur_by_pose
+//! The CLS map does not fuse lines itself: its actual segments are pieces
+//! of the walls of the wall store ([`SegmentMap`]), which fused the
+//! keyframe's lines (with its bridging of pieces) before the CLS update.
+//! This module gathers the walls an update touches into a [`LineTable`],
+//! one entry per wall, each with the wall's current line, and moves the
+//! boundary vertices onto the walls that moved so every loop still closes:
+//! a vertex between two actual segments goes to the intersection of their
+//! lines (if that is near), otherwise it is projected onto the moved line,
+//! and both neighbours share the new vertex.
+
+use std::collections::HashMap;
 
 use crate::geometry::CogLine;
 use crate::geometry::{CorrespondenceConfig, SegmentId, SegmentIndex};
-use crate::map::{SegmentMapConfig, fuse};
+use crate::map::SegmentMap;
 
 use super::loops::{ClsSegment, line_between};
 use super::region::{EdgeOrigin, RegionEdge};
 
-/// The wall lines taking part in one update: the actual segments of the
-/// touched part of the map, then the scan's new lines. An
-/// [`EdgeOrigin::Actual`] number indexes this table.
+/// The wall lines taking part in one update: the walls of the touched
+/// part of the map, then the keyframe's walls. An [`EdgeOrigin::Actual`]
+/// number indexes this table.
 #[derive(Debug, Default)]
 pub(crate) struct LineTable {
     lines: Vec<CogLine>,
-    /// Whether the line was moved by a fusion (its segments' end points
-    /// must follow).
+    /// The wall store's id of each entry; `None` for a segment of a map
+    /// saved without wall ids, which keeps its own line.
+    walls: Vec<Option<SegmentId>>,
+    /// Whether the line differs from where the boundary's vertices were
+    /// put (they must follow).
     moved: Vec<bool>,
+    /// Entry of each wall already in the table.
+    entries: HashMap<SegmentId, u32>,
     index: SegmentIndex,
 }
 
 impl LineTable {
     /// Registers a line of the map; returns its number.
-    pub fn add(&mut self, line: CogLine) -> u32 {
+    fn push(&mut self, line: CogLine, wall: Option<SegmentId>, moved: bool) -> u32 {
         let id = self.index.insert(line);
         self.lines.push(line);
-        self.moved.push(false);
+        self.walls.push(wall);
+        self.moved.push(moved);
         debug_assert_eq!(id.0 as usize + 1, self.lines.len());
+        if let Some(w) = wall {
+            self.entries.insert(w, id.0);
+        }
         id.0
+    }
+
+    /// The entry of wall `wall` of `store` (added if new), `None` if the
+    /// store does not hold it (or the wall that absorbed it).
+    fn wall_entry(&mut self, wall: SegmentId, store: &SegmentMap) -> Option<u32> {
+        let wall = store.resolve(wall)?;
+        let line = *store.wall(wall)?;
+        match self.entries.get(&wall) {
+            // The store's line is the truth, should it have changed since.
+            Some(&k) => {
+                let i = k as usize;
+                if self.lines[i] != line {
+                    self.lines[i] = line;
+                    self.moved[i] = true;
+                    self.index.update(SegmentId(k), line);
+                }
+                Some(k)
+            }
+            None => Some(self.push(line, Some(wall), false)),
+        }
+    }
+
+    /// Registers a boundary segment of the map: the entry of its wall in
+    /// `store`, marked moved when the wall's line is not the one the
+    /// segment was settled on. A segment naming no wall the store holds
+    /// (a map saved before pieces named their walls) takes the wall its
+    /// line corresponds to best, under the fusion gates; one with none
+    /// keeps its own line. Returns its number.
+    pub fn add_segment(&mut self, segment: &ClsSegment, store: &SegmentMap) -> u32 {
+        let entry = segment
+            .wall
+            .and_then(|w| self.wall_entry(w, store))
+            .or_else(|| {
+                let w = store
+                    .index()
+                    .best_match(&segment.line, &store.config().fusion)?;
+                self.wall_entry(w, store)
+            });
+        match entry {
+            Some(k) => {
+                let i = k as usize;
+                let l = &self.lines[i];
+                let s = &segment.line;
+                if (l.theta, l.xc, l.yc) != (s.theta, s.xc, s.yc) {
+                    self.moved[i] = true;
+                }
+                k
+            }
+            None => self.push(segment.line, None, false),
+        }
+    }
+
+    /// Registers the walls `walls` (ids in `store`) the keyframe's lines
+    /// went into, all marked moved; returns each one's number (`None`
+    /// where the store does not hold it) and how many were in the table
+    /// already (lines fused into a boundary wall).
+    pub fn add_keyframe_walls(
+        &mut self,
+        walls: &[SegmentId],
+        store: &SegmentMap,
+    ) -> (Vec<Option<u32>>, usize) {
+        let mut fused = 0;
+        let numbers = walls
+            .iter()
+            .map(|&w| {
+                let known = store
+                    .resolve(w)
+                    .is_some_and(|w| self.entries.contains_key(&w));
+                fused += usize::from(known);
+                let k = self.wall_entry(w, store)?;
+                self.moved[k as usize] = true;
+                Some(k)
+            })
+            .collect();
+        (numbers, fused)
     }
 
     pub fn line(&self, id: u32) -> Option<&CogLine> {
@@ -60,61 +145,17 @@ impl LineTable {
     }
 
     /// The boundary segment for an edge of the union: a wall piece takes
-    /// its line from the table, anything else is virtual.
+    /// its line and wall from the table, anything else is virtual.
     pub fn segment(&self, e: &RegionEdge) -> ClsSegment {
         match e.origin {
-            EdgeOrigin::Actual(id) => self
-                .line(id)
-                .map_or(ClsSegment::virtual_between(e.start, e.end), |l| {
-                    ClsSegment::actual_on(l, e.start, e.end)
-                }),
-            EdgeOrigin::Virtual | EdgeOrigin::Window => ClsSegment::virtual_between(e.start, e.end),
-        }
-    }
-
-    /// Fuses each observed scan line (map frame, blurred) into its best
-    /// corresponding map line, or adds it. Scan lines are matched only
-    /// against the lines present before this call, so two pieces of one
-    /// scan are never joined. Returns each scan line's number and how many
-    /// were fused.
-    pub fn observe(&mut self, observed: &[CogLine], cfg: &SegmentMapConfig) -> (Vec<u32>, usize) {
-        let known = self.lines.len();
-        let mut numbers = Vec::with_capacity(observed.len());
-        let mut fresh = Vec::new();
-        let mut fused_count = 0;
-        for obs in observed {
-            let target = self
-                .index
-                .best_match(obs, &cfg.fusion)
-                .filter(|id| (id.0 as usize) < known);
-            let fused =
-                target.and_then(|id| Some((id, fuse(self.lines.get(id.0 as usize)?, obs)?)));
-            match fused {
-                Some((id, mut line)) => {
-                    line.sigma_c = line.sigma_c.max(cfg.min_sigma_c);
-                    line.sigma_theta = line.sigma_theta.max(cfg.min_sigma_theta);
-                    self.set(id, line);
-                    numbers.push(id.0);
-                    fused_count += 1;
-                }
-                None => {
-                    numbers.push(u32::MAX);
-                    fresh.push((numbers.len() - 1, *obs));
-                }
+            EdgeOrigin::Actual(id) => {
+                self.line(id)
+                    .map_or(ClsSegment::virtual_between(e.start, e.end), |l| {
+                        let wall = self.walls.get(id as usize).copied().flatten();
+                        ClsSegment::actual_on(l, wall, e.start, e.end)
+                    })
             }
-        }
-        for (k, line) in fresh {
-            numbers[k] = self.add(line);
-        }
-        (numbers, fused_count)
-    }
-
-    fn set(&mut self, id: SegmentId, line: CogLine) {
-        let i = id.0 as usize;
-        if let (Some(slot), Some(moved)) = (self.lines.get_mut(i), self.moved.get_mut(i)) {
-            *slot = line;
-            *moved = true;
-            self.index.update(id, line);
+            EdgeOrigin::Virtual | EdgeOrigin::Window => ClsSegment::virtual_between(e.start, e.end),
         }
     }
 
@@ -240,35 +281,94 @@ fn intersection(a: &CogLine, b: &CogLine) -> Option<[f64; 2]> {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
+    use crate::geometry::Pose2;
+
+    const NO_COV: [[f64; 3]; 3] = [[0.0; 3]; 3];
 
     fn wall(x0: f64, x1: f64, y: f64) -> CogLine {
         let c = 0.5 * (x0 + x1);
         CogLine::from_centre(0.0, [c, y], x0 - c, x1 - c, 0.003, 0.005, 30)
     }
 
+    /// The boundary piece of `line` from `x0` to `x1`, on wall `id`.
+    fn piece(line: &CogLine, id: Option<SegmentId>, x0: f64, x1: f64) -> ClsSegment {
+        let at = |x: f64| line.project_point([x, line.yc]);
+        ClsSegment::actual_on(line, id, at(x0), at(x1))
+    }
+
     #[test]
-    fn a_scan_line_fuses_with_its_wall_and_new_ones_are_added() {
-        let cfg = SegmentMapConfig::default();
+    fn a_wall_is_one_entry_and_the_keyframe_walls_take_the_store_lines() {
+        let mut store = SegmentMap::default();
+        let bottom = store.update(&[wall(0.0, 4.0, 0.0)], &Pose2::IDENTITY, &NO_COV);
+        let b = bottom.walls[0];
+        let line = *store.wall(b).unwrap();
         let mut table = LineTable::default();
-        let w = table.add(wall(0.0, 4.0, 0.0));
-        let (numbers, fused) = table.observe(&[wall(1.0, 5.0, 0.02), wall(0.0, 2.0, 3.0)], &cfg);
+        // Two pieces of one wall (a door between) share its entry.
+        let first = table.add_segment(&piece(&line, Some(b), 0.0, 1.0), &store);
+        let second = table.add_segment(&piece(&line, Some(b), 2.0, 4.0), &store);
+        assert_eq!(first, second);
+        assert!(!table.is_moved(EdgeOrigin::Actual(first)));
+        // A piece without a wall takes the wall it lies on, or keeps its
+        // own line where the store has none.
+        let adopted = table.add_segment(&piece(&wall(0.5, 1.5, 0.01), None, 0.5, 1.5), &store);
+        assert_eq!(adopted, first);
+        let own = table.add_segment(&piece(&wall(0.0, 1.0, 3.0), None, 0.0, 1.0), &store);
+        assert_ne!(own, first);
+
+        let seen = store.update(
+            &[wall(1.0, 5.0, 0.02), wall(0.0, 2.0, 5.0)],
+            &Pose2::IDENTITY,
+            &NO_COV,
+        );
+        let (numbers, fused) = table.add_keyframe_walls(&seen.walls, &store);
         assert_eq!(fused, 1);
-        assert_eq!(numbers[0], w);
-        assert_eq!(numbers[1], 1);
-        let l = table.line(w).unwrap();
-        assert!(l.yc > 0.0 && l.yc < 0.02, "{}", l.yc);
-        assert!(table.is_moved(EdgeOrigin::Actual(w)));
-        assert!(!table.is_moved(EdgeOrigin::Actual(1)));
+        assert_eq!(numbers[0], Some(first));
+        assert!(numbers[1].is_some_and(|n| n != first && n != own));
+        // The entry is the store's fused wall, and it moved.
+        assert_eq!(table.line(first), store.wall(b));
+        assert!(table.line(first).unwrap().yc > 0.0);
+        assert!(table.is_moved(EdgeOrigin::Actual(first)));
+        let s = table.segment(&RegionEdge {
+            start: [0.5, 0.01],
+            end: [1.5, 0.01],
+            origin: EdgeOrigin::Actual(first),
+        });
+        assert_eq!(s.wall, Some(b));
+    }
+
+    #[test]
+    fn a_piece_of_a_wall_bridged_into_another_takes_that_wall() {
+        let mut store = SegmentMap::default();
+        let ids = store
+            .update(
+                &[wall(0.0, 2.0, 3.0), wall(2.05, 5.0, 3.0)],
+                &Pose2::IDENTITY,
+                &NO_COV,
+            )
+            .walls;
+        let right = *store.wall(ids[1]).unwrap();
+        // A later view across the seam joins the two pieces.
+        let joined = store
+            .update(&[wall(1.5, 3.2, 3.0)], &Pose2::IDENTITY, &NO_COV)
+            .walls[0];
+        assert_eq!(store.len(), 1);
+        let mut table = LineTable::default();
+        let k = table.add_segment(&piece(&right, Some(ids[1]), 3.0, 5.0), &store);
+        assert_eq!(table.line(k), store.wall(joined));
+        assert!(table.is_moved(EdgeOrigin::Actual(k)));
     }
 
     #[test]
     fn a_frontier_on_a_wall_in_pieces_is_the_wall_and_one_across_a_doorway_is_not() {
         // One straight wall held as two pieces end to end (0–4 m, 4–6 m),
         // then a doorway, then the wall again (7–9 m).
+        let store = SegmentMap::default();
         let mut table = LineTable::default();
-        let first = table.add(wall(0.0, 4.0, 0.0));
-        let second = table.add(wall(4.0, 6.0, 0.0));
-        table.add(wall(7.0, 9.0, 0.0));
+        let mut add =
+            |x0: f64, x1: f64| table.add_segment(&piece(&wall(x0, x1, 0.0), None, x0, x1), &store);
+        let first = add(0.0, 4.0);
+        let second = add(4.0, 6.0);
+        add(7.0, 9.0);
         let virtual_edge = |x0: f64, x1: f64| RegionEdge {
             start: [x0, 0.001],
             end: [x1, 0.0015],
@@ -297,10 +397,8 @@ mod tests {
 
     #[test]
     fn settling_keeps_the_loop_closed_at_the_corner() {
-        let cfg = SegmentMapConfig::default();
-        let mut table = LineTable::default();
-        let bottom = table.add(wall(0.0, 4.0, 0.0));
-        let right = table.add(CogLine::from_centre(
+        let mut store = SegmentMap::default();
+        let right_line = CogLine::from_centre(
             std::f64::consts::FRAC_PI_2,
             [4.0, 1.5],
             -1.5,
@@ -308,9 +406,26 @@ mod tests {
             0.003,
             0.005,
             30,
-        ));
-        table.observe(&[wall(0.0, 4.0, 0.04)], &cfg);
+        );
+        let ids = store
+            .update(
+                &[wall(0.0, 4.0, 0.0), right_line],
+                &Pose2::IDENTITY,
+                &NO_COV,
+            )
+            .walls;
+        let mut table = LineTable::default();
         let p = [[0.0, 0.0], [4.0, 0.0], [4.0, 3.0], [0.0, 3.0]];
+        let bottom = table.add_segment(
+            &ClsSegment::actual_on(store.wall(ids[0]).unwrap(), Some(ids[0]), p[0], p[1]),
+            &store,
+        );
+        let right = table.add_segment(
+            &ClsSegment::actual_on(store.wall(ids[1]).unwrap(), Some(ids[1]), p[1], p[2]),
+            &store,
+        );
+        let seen = store.update(&[wall(0.0, 4.0, 0.04)], &Pose2::IDENTITY, &NO_COV);
+        table.add_keyframe_walls(&seen.walls, &store);
         let origins = [
             EdgeOrigin::Actual(bottom),
             EdgeOrigin::Actual(right),
@@ -329,6 +444,7 @@ mod tests {
             assert_eq!(contour[i].end, contour[(i + 1) % 4].start);
         }
         let fused = table.line(bottom).unwrap();
+        assert!(fused.yc > 0.0, "{fused:?}");
         // The corner is where the fused bottom wall meets the right wall.
         assert!((contour[1].start[0] - 4.0).abs() < 1e-9);
         assert!(fused.distance_to_point(contour[1].start) < 1e-9);

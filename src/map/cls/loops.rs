@@ -14,7 +14,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::{CogLine, wrap_angle_positive};
+use crate::geometry::{CogLine, SegmentId, wrap_angle_positive};
 
 /// Whether a boundary segment is a wall or a frontier.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -28,12 +28,17 @@ pub enum SegmentMode {
 }
 
 /// One boundary segment: its COG line (start and end are the boundary
-/// vertices) and its mode. Virtual segments carry a line with zero
-/// variances and `n_points == 0`.
+/// vertices), its mode, and for a piece of a wall the wall of the wall
+/// store ([`crate::map::SegmentMap`]) it lies on, whose line it carries.
+/// Virtual segments carry a line with zero variances and `n_points == 0`
+/// and no wall.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ClsSegment {
     pub line: CogLine,
     pub mode: SegmentMode,
+    /// The wall this piece belongs to; `None` for virtual segments and for
+    /// walls of a map saved before walls had ids in the CLS map.
+    pub wall: Option<SegmentId>,
 }
 
 impl ClsSegment {
@@ -42,6 +47,7 @@ impl ClsSegment {
         ClsSegment {
             line: line_between(start, end),
             mode: SegmentMode::Virtual,
+            wall: None,
         }
     }
 
@@ -50,7 +56,12 @@ impl ClsSegment {
     /// the union's tolerances (the 1 mm grid; after fusion and sliver
     /// cleaning, within `RegionConfig::sliver_width`): the loop must close
     /// exactly, the line carries the wall's best estimate.
-    pub fn actual_on(line: &CogLine, start: [f64; 2], end: [f64; 2]) -> ClsSegment {
+    pub fn actual_on(
+        line: &CogLine,
+        wall: Option<SegmentId>,
+        start: [f64; 2],
+        end: [f64; 2],
+    ) -> ClsSegment {
         ClsSegment {
             // A piece of a wall has no wall ends of its own.
             line: CogLine {
@@ -60,6 +71,7 @@ impl ClsSegment {
                 ..*line
             },
             mode: SegmentMode::Actual,
+            wall,
         }
     }
 
@@ -123,6 +135,14 @@ impl ClsLoop {
 
     pub fn segments(&self) -> &[ClsSegment] {
         &self.segments
+    }
+
+    /// Re-points each wall piece at the wall `f` gives for its wall
+    /// (none where `f` gives none); the geometry stays as it is.
+    pub(crate) fn map_walls(&mut self, f: impl Fn(SegmentId) -> Option<SegmentId>) {
+        for s in &mut self.segments {
+            s.wall = s.wall.and_then(&f);
+        }
     }
 
     #[cfg(test)]
@@ -213,6 +233,8 @@ pub struct ClsmItem {
     pub next: usize,
     pub line: CogLine,
     pub mode: SegmentMode,
+    /// The wall an actual segment lies on (see [`ClsSegment::wall`]).
+    pub wall: Option<SegmentId>,
 }
 
 /// The CLSM_Item list of `shapes`: loops in order (each outer loop before
@@ -228,6 +250,7 @@ pub fn items(shapes: &[ClsShape]) -> Vec<ClsmItem> {
                 next: first + (k + 1) % n,
                 line: s.line,
                 mode: s.mode,
+                wall: s.wall,
             });
         }
     }

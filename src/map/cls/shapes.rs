@@ -5,9 +5,15 @@
 use super::fusion::LineTable;
 use super::loops::{ClsLoop, ClsShape, SegmentMode};
 use super::region::{EdgeOrigin, RegionEdge, RegionShape};
+use crate::map::SegmentMap;
 
-/// Whole loops as overlay contours, walls registered in `table`.
-pub(crate) fn whole_contours(loops: &[&ClsLoop], table: &mut LineTable) -> Vec<Vec<RegionEdge>> {
+/// Whole loops as overlay contours, walls (of `store`) registered in
+/// `table`.
+pub(crate) fn whole_contours(
+    loops: &[&ClsLoop],
+    table: &mut LineTable,
+    store: &SegmentMap,
+) -> Vec<Vec<RegionEdge>> {
     loops
         .iter()
         .map(|lp| {
@@ -17,7 +23,7 @@ pub(crate) fn whole_contours(loops: &[&ClsLoop], table: &mut LineTable) -> Vec<V
                     start: s.start(),
                     end: s.end(),
                     origin: match s.mode {
-                        SegmentMode::Actual => EdgeOrigin::Actual(table.add(s.line)),
+                        SegmentMode::Actual => EdgeOrigin::Actual(table.add_segment(s, store)),
                         SegmentMode::Virtual => EdgeOrigin::Virtual,
                     },
                 })

@@ -26,7 +26,7 @@ use crc::{CRC_32_ISO_HDLC, Crc};
 use serde::{Deserialize, Serialize};
 
 use super::loops::{ClsLoop, ClsSegment, ClsShape, ClsmItem, InvariantError, SegmentMode};
-use crate::geometry::CogLine;
+use crate::geometry::{CogLine, SegmentId};
 
 /// The file's `format` tag.
 pub const FORMAT: &str = "clsmap-cls";
@@ -49,6 +49,10 @@ pub struct SegmentRecord {
     pub sigma_c: f64,
     pub start: [f64; 2],
     pub end: [f64; 2],
+    /// The wall (id in the file's `walls`) an actual segment lies on;
+    /// absent in version-1 and version-2 files.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wall: Option<SegmentId>,
 }
 
 /// The whole version-1 file, its segments still as the bytes stored.
@@ -149,6 +153,7 @@ pub(crate) fn record(item: &ClsmItem) -> SegmentRecord {
         sigma_c: item.line.sigma_c,
         start: item.line.start,
         end: item.line.end,
+        wall: item.wall,
     }
 }
 
@@ -322,7 +327,13 @@ fn shapes_from_records(records: &[SegmentRecord]) -> Result<Vec<ClsShape>, Store
                 n_points: 0,
                 wall_ends: crate::geometry::WallEnds::NONE,
             };
-            segments.push(ClsSegment { line, mode: r.mode });
+            // Only a piece of a wall names one.
+            let wall = r.wall.filter(|_| r.mode == SegmentMode::Actual);
+            segments.push(ClsSegment {
+                line,
+                mode: r.mode,
+                wall,
+            });
             k = r.next;
             if k == first {
                 break;

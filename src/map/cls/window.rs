@@ -25,6 +25,7 @@ use std::collections::BTreeMap;
 
 use crate::geometry::CogLine;
 use crate::geometry::{CorrespondenceConfig, lines_correspond};
+use crate::map::SegmentMap;
 
 use super::fusion::LineTable;
 use super::loops::{ClsLoop, ClsSegment, SegmentMode};
@@ -178,12 +179,13 @@ impl Window {
         &mut self,
         loops: &[&ClsLoop],
         table: &mut LineTable,
+        store: &SegmentMap,
     ) -> Option<Vec<Vec<RegionEdge>>> {
         // Chains keyed by their entry point; all crossings for the arcs.
         let mut chains: BTreeMap<[i64; 2], Vec<RegionEdge>> = BTreeMap::new();
         let mut crossings: Vec<Crossing> = Vec::new();
         for lp in loops {
-            self.clip_loop(lp, table, &mut chains, &mut crossings)?;
+            self.clip_loop(lp, table, store, &mut chains, &mut crossings)?;
         }
         // Arcs of ∂W from each exit counter-clockwise to the next crossing.
         let mut arcs: BTreeMap<[i64; 2], Vec<RegionEdge>> = BTreeMap::new();
@@ -224,6 +226,7 @@ impl Window {
         &mut self,
         lp: &ClsLoop,
         table: &mut LineTable,
+        store: &SegmentMap,
         chains: &mut BTreeMap<[i64; 2], Vec<RegionEdge>>,
         crossings: &mut Vec<Crossing>,
     ) -> Option<()> {
@@ -253,7 +256,7 @@ impl Window {
                 SegmentMode::Actual => match wall {
                     Some((k, o)) if k == i => o,
                     _ => {
-                        let o = EdgeOrigin::Actual(table.add(s.line));
+                        let o = EdgeOrigin::Actual(table.add_segment(s, store));
                         wall = Some((i, o));
                         o
                     }
@@ -425,6 +428,7 @@ fn piece(s: &ClsSegment, from: [f64; 2], to: [f64; 2]) -> ClsSegment {
             ..s.line
         },
         mode: s.mode,
+        wall: s.wall,
     }
 }
 
@@ -471,13 +475,14 @@ fn merge_junctions(
         if len == 0.0 || !same || dot <= 0.0 || dot >= len * len {
             continue;
         }
-        let line = if b.line.n_points > a.line.n_points {
-            b.line
+        let kept = if b.line.n_points > a.line.n_points {
+            b
         } else {
-            a.line
+            a
         };
+        let (line, wall) = (kept.line, kept.wall);
         segments[a_idx] = match a.mode {
-            SegmentMode::Actual => ClsSegment::actual_on(&line, p, q),
+            SegmentMode::Actual => ClsSegment::actual_on(&line, wall, p, q),
             SegmentMode::Virtual => ClsSegment::virtual_between(p, q),
         };
         used.extend([a_idx, b_idx]);

@@ -46,10 +46,9 @@ fn far_obstacle_loops_stay_out_of_the_union_and_in_the_map() {
     // Grow the hall's end; only the last pillar is near.
     let stats = map
         .add_region(
+            &SegmentMap::default(),
             &local_square(38.8, 1.0, 44.0, 4.0),
             &[],
-            Pose2::IDENTITY,
-            [[0.0; 3]; 3],
         )
         .unwrap();
     assert_eq!(stats.touched_shapes, 1);
@@ -74,10 +73,9 @@ fn a_bulge_through_a_long_wall_is_clipped_and_spliced() {
     let before = map.area();
     let stats = map
         .add_region(
+            &SegmentMap::default(),
             &local_square(10.0, -1.0, 12.0, 1.0),
             &[],
-            Pose2::IDENTITY,
-            [[0.0; 3]; 3],
         )
         .unwrap();
     assert!(stats.clipped);
@@ -107,20 +105,18 @@ fn separate_regions_are_not_touched() {
     let mut map = hall();
     let stats = map
         .add_region(
+            &SegmentMap::default(),
             &local_square(100.0, 0.0, 102.0, 2.0),
             &[],
-            Pose2::IDENTITY,
-            [[0.0; 3]; 3],
         )
         .unwrap();
     assert_eq!((stats.touched_shapes, stats.touched_segments), (0, 0));
     assert_eq!(map.shapes().len(), 2);
     // Bridging the two merges them into one shape.
     map.add_region(
+        &SegmentMap::default(),
         &local_square(41.0, 0.5, 101.0, 1.5),
         &[],
-        Pose2::IDENTITY,
-        [[0.0; 3]; 3],
     )
     .unwrap();
     assert_eq!(map.shapes().len(), 1);
@@ -140,8 +136,8 @@ proptest::proptest! {
         whole.config.clip_to_window = false;
         for (x, y, w, h) in regions {
             let local = local_square(x, y, x + w, y + h);
-            let a = clipped.add_region(&local, &[], Pose2::IDENTITY, [[0.0; 3]; 3]);
-            let b = whole.add_region(&local, &[], Pose2::IDENTITY, [[0.0; 3]; 3]);
+            let a = clipped.add_region(&SegmentMap::default(), &local, &[]);
+            let b = whole.add_region(&SegmentMap::default(), &local, &[]);
             proptest::prop_assert_eq!(a.is_ok(), b.is_ok());
             proptest::prop_assert_eq!(clipped.check_invariants(), Ok(()));
             // Same region, up to the cleaning's vertex moves (a few mm):
@@ -187,12 +183,18 @@ fn a_bad_update_leaves_the_map_as_it_was() {
         theta: 0.0,
     };
     assert_eq!(
-        map.update(&[], &scan, nan_pose, [[0.0; 3]; 3]),
+        map.update(
+            &mut SegmentMap::default(),
+            &[],
+            &scan,
+            nan_pose,
+            [[0.0; 3]; 3]
+        ),
         Err(ClsError::BadPose)
     );
     let far = local_square(0.0, 0.0, 2e5, 1.0);
     assert!(matches!(
-        map.add_region(&far, &[], Pose2::IDENTITY, [[0.0; 3]; 3]),
+        map.add_region(&SegmentMap::default(), &far, &[]),
         Err(ClsError::Region(RegionError::Coordinate(_)))
     ));
     assert_eq!(map.items(), before);
