@@ -562,3 +562,65 @@ fn an_office_corridor_with_rooms_keeps_the_walls_between_them() {
     assert!(rmse <= 0.05, "RMSE {rmse} m");
     mapper.cls_map().check_invariants().unwrap();
 }
+
+/// A map saved before wall pieces named their walls (version 2), then
+/// extended: the pieces the new keyframes' updates reach take the walls
+/// they lie on, so the one wall store holds again.
+#[test]
+fn pieces_of_a_map_saved_without_wall_ids_take_their_walls_when_extended() {
+    let world = World::room_with_boxes();
+    let truth = tour(&[[1.0, 1.0], [7.0, 1.0], [7.0, 5.0], [1.0, 5.0]], 1, 0.2);
+    let mut rng = Rng::new(8);
+    let odo = drifting_odometry(&truth, 1.01, 0.005, &mut rng);
+    let mut config = MapperConfig::default();
+    // Keyframes kept, no loop searched: the CLS map grows by incremental
+    // updates only (a rebuild would name every wall anyway).
+    config.loop_closure.min_travel = 1e6;
+    let (mapper, _, _) = map_tour(&world, &truth, &odo, config, &mut rng);
+    let mut contents = mapper.contents();
+    contents
+        .cls
+        .resolve_walls(&clsmap::map::SegmentMap::default());
+    let unnamed =
+        |m: &clsmap::map::cls::ClsMap| m.actual_segments().filter(|s| s.wall.is_none()).count();
+    let pieces = contents.cls.actual_segments().count();
+    assert_eq!(unnamed(&contents.cls), pieces);
+
+    let mut extended =
+        Mapper::from_map(config, contents, clsmap::pipeline::MapMode::Extend).unwrap();
+    let spec = ScanSpec::lms200_half_degree(0.01);
+    for (k, (t, o)) in truth.iter().zip(&odo).enumerate() {
+        let scan = cast_scan(&world, t, &spec, 500.0 + 0.2 * k as f64, &mut rng);
+        extended.process(&ScanRecord {
+            scan,
+            odometry: Some(*o),
+        });
+    }
+    assert!(
+        extended.summary().keyframes > 10,
+        "{:?}",
+        extended.summary()
+    );
+    assert_eq!(extended.reframes(), 0, "the map was rebuilt");
+    let cls = extended.cls_map();
+    let left = unnamed(cls);
+    eprintln!(
+        "{pieces} pieces loaded, none named; after {} keyframes {left} of {} name no wall",
+        extended.summary().keyframes,
+        cls.actual_segments().count()
+    );
+    assert!(
+        left * 5 < cls.actual_segments().count(),
+        "{left} of {} pieces name no wall",
+        cls.actual_segments().count()
+    );
+    for piece in cls.actual_segments() {
+        let Some(wall) = piece.wall.and_then(|w| extended.map().wall(w)) else {
+            continue;
+        };
+        let off = wall
+            .distance_to_point(piece.start())
+            .max(wall.distance_to_point(piece.end()));
+        assert!(off < 0.02, "{piece:?} on {wall:?}");
+    }
+}
