@@ -575,7 +575,7 @@ impl ClsMap {
             &self.config.region,
         )?;
         for contour in raw.iter_mut().flatten() {
-            table.recover_walls(contour, self.config.region.sliver_width);
+            table.recover_walls(contour, self.config.region.sliver_width, walls);
         }
         Ok(clean_checked(&raw, &self.config.region)?)
     }

@@ -14,7 +14,7 @@
 use std::collections::HashMap;
 
 use crate::geometry::CogLine;
-use crate::geometry::{CorrespondenceConfig, SegmentId, SegmentIndex};
+use crate::geometry::{CorrespondenceConfig, SegmentId};
 use crate::map::SegmentMap;
 
 use super::loops::{ClsSegment, line_between};
@@ -34,21 +34,19 @@ pub(crate) struct LineTable {
     moved: Vec<bool>,
     /// Entry of each wall already in the table.
     entries: HashMap<SegmentId, u32>,
-    index: SegmentIndex,
 }
 
 impl LineTable {
     /// Registers a line of the map; returns its number.
     fn push(&mut self, line: CogLine, wall: Option<SegmentId>, moved: bool) -> u32 {
-        let id = self.index.insert(line);
+        let k = u32::try_from(self.lines.len()).unwrap_or(u32::MAX);
         self.lines.push(line);
         self.walls.push(wall);
         self.moved.push(moved);
-        debug_assert_eq!(id.0 as usize + 1, self.lines.len());
         if let Some(w) = wall {
-            self.entries.insert(w, id.0);
+            self.entries.insert(w, k);
         }
-        id.0
+        k
     }
 
     /// The entry of wall `wall` of `store` (added if new), `None` if the
@@ -63,7 +61,6 @@ impl LineTable {
                 if self.lines[i] != line {
                     self.lines[i] = line;
                     self.moved[i] = true;
-                    self.index.update(SegmentId(k), line);
                 }
                 Some(k)
             }
@@ -203,10 +200,15 @@ impl LineTable {
     /// put a few millimetres beyond the fitted wall, where the union keeps
     /// it instead of the wall; an actual segment must win over a virtual
     /// one lying on it. A gap between the pieces (a doorway on the wall's
-    /// line) leaves the edge virtual. The walls are found through the
-    /// spatial index, so this costs O(log n) per edge.
-    pub fn recover_walls(&self, contour: &mut [RegionEdge], tolerance: f64) {
-        let mut pieces: Vec<(f64, f64, u32)> = Vec::new();
+    /// line) leaves the edge virtual. The walls are those of `store`,
+    /// found through its spatial index, so this costs O(log n) per edge.
+    pub fn recover_walls(
+        &mut self,
+        contour: &mut [RegionEdge],
+        tolerance: f64,
+        store: &SegmentMap,
+    ) {
+        let mut pieces: Vec<(f64, f64, SegmentId)> = Vec::new();
         for e in contour
             .iter_mut()
             .filter(|e| e.origin == EdgeOrigin::Virtual)
@@ -229,13 +231,13 @@ impl LineTable {
                 extent_tolerance: tolerance + length,
             };
             pieces.clear();
-            pieces.extend(self.index.candidates(&probe, &gates).filter_map(|id| {
-                let l = self.lines.get(id.0 as usize)?;
+            pieces.extend(store.index().candidates(&probe, &gates).filter_map(|id| {
+                let l = store.wall(id)?;
                 let on_line = [e.start, e.end]
                     .iter()
                     .all(|&p| l.distance_to_point(p) <= tolerance);
                 let (a, b) = (along_edge(l.start), along_edge(l.end));
-                on_line.then_some((a.min(b) - tolerance, a.max(b) + tolerance, id.0))
+                on_line.then_some((a.min(b) - tolerance, a.max(b) + tolerance, id))
             }));
             pieces.sort_by(|x, y| x.0.total_cmp(&y.0));
             // Swept from the edge's start: covered while the pieces overlap.
@@ -253,8 +255,8 @@ impl LineTable {
                 .iter()
                 .map(|&(lo, hi, id)| (hi.min(length) - lo.max(0.0), id))
                 .max_by(|x, y| x.0.total_cmp(&y.0).then(y.1.cmp(&x.1)));
-            if let Some((_, id)) = most {
-                e.origin = EdgeOrigin::Actual(id);
+            if let Some(k) = most.and_then(|(_, id)| self.wall_entry(id, store)) {
+                e.origin = EdgeOrigin::Actual(k);
             }
         }
     }
@@ -360,15 +362,15 @@ mod tests {
 
     #[test]
     fn a_frontier_on_a_wall_in_pieces_is_the_wall_and_one_across_a_doorway_is_not() {
-        // One straight wall held as two pieces end to end (0–4 m, 4–6 m),
+        // One straight wall held as two walls end to end (0–4 m, 4–6 m),
         // then a doorway, then the wall again (7–9 m).
-        let store = SegmentMap::default();
+        let mut store = SegmentMap::default();
+        store.insert_walls(&[
+            wall(0.0, 4.0, 0.0),
+            wall(4.0, 6.0, 0.0),
+            wall(7.0, 9.0, 0.0),
+        ]);
         let mut table = LineTable::default();
-        let mut add =
-            |x0: f64, x1: f64| table.add_segment(&piece(&wall(x0, x1, 0.0), None, x0, x1), &store);
-        let first = add(0.0, 4.0);
-        let second = add(4.0, 6.0);
-        add(7.0, 9.0);
         let virtual_edge = |x0: f64, x1: f64| RegionEdge {
             start: [x0, 0.001],
             end: [x1, 0.0015],
@@ -381,18 +383,18 @@ mod tests {
             virtual_edge(5.0, 8.0),
             virtual_edge(6.2, 6.8),
         ];
-        table.recover_walls(&mut contour, 0.02);
-        let origins: Vec<EdgeOrigin> = contour.iter().map(|e| e.origin).collect();
-        assert_eq!(
-            origins,
-            [
-                EdgeOrigin::Actual(first),
-                EdgeOrigin::Actual(first),
-                EdgeOrigin::Actual(second),
-                EdgeOrigin::Virtual,
-                EdgeOrigin::Virtual,
-            ]
-        );
+        table.recover_walls(&mut contour, 0.02, &store);
+        let walls: Vec<Option<SegmentId>> = contour
+            .iter()
+            .map(|e| match e.origin {
+                EdgeOrigin::Actual(_) => table.segment(e).wall,
+                _ => None,
+            })
+            .collect();
+        let (first, second) = (Some(SegmentId(0)), Some(SegmentId(1)));
+        assert_eq!(walls, [first, first, second, None, None]);
+        // Both edges on the first wall share its entry.
+        assert_eq!(contour[0].origin, contour[1].origin);
     }
 
     #[test]
