@@ -206,18 +206,48 @@ fn a_long_loop_driven_twice_on_drifting_odometry_closes() {
     std::fs::remove_dir_all(&out).unwrap();
 }
 
+/// One lap of the room with boxes on slightly drifting odometry
+/// (`seed`), keyframes kept and no loop searched (none lies this far
+/// back), so the maps grow by incremental updates only: the world, the
+/// true and odometric poses, the configuration, the generator as the lap
+/// left it, and the mapper.
+fn one_lap_of_the_room(seed: u64) -> (World, Vec<Pose2>, Vec<Pose2>, MapperConfig, Rng, Mapper) {
+    let world = World::room_with_boxes();
+    let truth = tour(&[[1.0, 1.0], [7.0, 1.0], [7.0, 5.0], [1.0, 5.0]], 1, 0.2);
+    let mut rng = Rng::new(seed);
+    let odo = drifting_odometry(&truth, 1.01, 0.005, &mut rng);
+    let mut config = MapperConfig::default();
+    config.loop_closure.min_travel = 1e6;
+    let (mapper, _, _) = map_tour(&world, &truth, &odo, config, &mut rng);
+    (world, truth, odo, config, rng, mapper)
+}
+
+/// Checks that every wall piece of `cls` naming a standing wall of
+/// `walls` lies on it: ends within 2 cm of its line, direction within
+/// 0.01 rad (a piece the updates' windows last reached before its wall
+/// was fused again keeps the line it was settled on, a few mm away).
+/// Returns how many pieces name no standing wall.
+fn pieces_naming_no_wall(cls: &clsmap::map::cls::ClsMap, walls: &clsmap::map::SegmentMap) -> usize {
+    let mut unnamed = 0;
+    for piece in cls.actual_segments() {
+        let Some(wall) = piece.wall.and_then(|w| walls.wall(w)) else {
+            unnamed += 1;
+            continue;
+        };
+        let off = wall
+            .distance_to_point(piece.start())
+            .max(wall.distance_to_point(piece.end()));
+        let turn = wrap_angle(wall.theta - piece.line.theta).abs();
+        assert!(off < 0.02 && turn < 0.01, "{piece:?} on {wall:?}");
+    }
+    unnamed
+}
+
 /// With no pose moved, the rebuild from the keyframes gives the maps the
 /// incremental path built, value for value.
 #[test]
 fn the_rebuild_from_keyframes_equals_the_incremental_maps() {
-    let world = World::room_with_boxes();
-    let truth = tour(&[[1.0, 1.0], [7.0, 1.0], [7.0, 5.0], [1.0, 5.0]], 1, 0.2);
-    let mut rng = Rng::new(3);
-    let odo = drifting_odometry(&truth, 1.01, 0.005, &mut rng);
-    let mut config = MapperConfig::default();
-    // Keyframes kept, no loop searched (none lies this far back).
-    config.loop_closure.min_travel = 1e6;
-    let (mapper, _, _) = map_tour(&world, &truth, &odo, config, &mut rng);
+    let (_, _, _, config, _, mapper) = one_lap_of_the_room(3);
     let mut graph = mapper.keyframe_graph().clone();
     assert!(graph.len() > 10, "{} keyframes", graph.len());
     let walls = graph.rebuild_walls(config.map);
@@ -232,22 +262,9 @@ fn the_rebuild_from_keyframes_equals_the_incremental_maps() {
     );
     assert_eq!(refused, mapper.summary().cls_rejected);
     assert_eq!(cls.items(), mapper.cls_map().items());
-    // Every wall piece of the CLS map names a standing wall and lies on
-    // it (a piece the updates' windows last reached before its wall was
-    // fused again keeps the line it was settled on, a few mm away).
-    let pieces: Vec<_> = cls.actual_segments().collect();
-    assert!(pieces.len() > 10);
-    for piece in pieces {
-        let wall = piece
-            .wall
-            .and_then(|w| both.wall(w))
-            .expect("a standing wall");
-        let off = wall
-            .distance_to_point(piece.start())
-            .max(wall.distance_to_point(piece.end()));
-        let turn = clsmap::geometry::wrap_angle(wall.theta - piece.line.theta).abs();
-        assert!(off < 0.02 && turn < 0.01, "{piece:?} on {wall:?}");
-    }
+    // Every wall piece of the CLS map names a standing wall and lies on it.
+    assert!(cls.actual_segments().count() > 10);
+    assert_eq!(pieces_naming_no_wall(&cls, &both), 0);
 }
 
 /// Optimisations off the real-time loop: on the long loop with odometry
@@ -568,23 +585,14 @@ fn an_office_corridor_with_rooms_keeps_the_walls_between_them() {
 /// they lie on, so the one wall store holds again.
 #[test]
 fn pieces_of_a_map_saved_without_wall_ids_take_their_walls_when_extended() {
-    let world = World::room_with_boxes();
-    let truth = tour(&[[1.0, 1.0], [7.0, 1.0], [7.0, 5.0], [1.0, 5.0]], 1, 0.2);
-    let mut rng = Rng::new(8);
-    let odo = drifting_odometry(&truth, 1.01, 0.005, &mut rng);
-    let mut config = MapperConfig::default();
-    // Keyframes kept, no loop searched: the CLS map grows by incremental
-    // updates only (a rebuild would name every wall anyway).
-    config.loop_closure.min_travel = 1e6;
-    let (mapper, _, _) = map_tour(&world, &truth, &odo, config, &mut rng);
+    // Incremental updates only: a rebuild would name every wall anyway.
+    let (world, truth, odo, config, mut rng, mapper) = one_lap_of_the_room(8);
     let mut contents = mapper.contents();
     contents
         .cls
         .resolve_walls(&clsmap::map::SegmentMap::default());
-    let unnamed =
-        |m: &clsmap::map::cls::ClsMap| m.actual_segments().filter(|s| s.wall.is_none()).count();
     let pieces = contents.cls.actual_segments().count();
-    assert_eq!(unnamed(&contents.cls), pieces);
+    assert!(contents.cls.actual_segments().all(|s| s.wall.is_none()));
 
     let mut extended =
         Mapper::from_map(config, contents, clsmap::pipeline::MapMode::Extend).unwrap();
@@ -603,7 +611,7 @@ fn pieces_of_a_map_saved_without_wall_ids_take_their_walls_when_extended() {
     );
     assert_eq!(extended.reframes(), 0, "the map was rebuilt");
     let cls = extended.cls_map();
-    let left = unnamed(cls);
+    let left = pieces_naming_no_wall(cls, extended.map());
     eprintln!(
         "{pieces} pieces loaded, none named; after {} keyframes {left} of {} name no wall",
         extended.summary().keyframes,
@@ -614,13 +622,4 @@ fn pieces_of_a_map_saved_without_wall_ids_take_their_walls_when_extended() {
         "{left} of {} pieces name no wall",
         cls.actual_segments().count()
     );
-    for piece in cls.actual_segments() {
-        let Some(wall) = piece.wall.and_then(|w| extended.map().wall(w)) else {
-            continue;
-        };
-        let off = wall
-            .distance_to_point(piece.start())
-            .max(wall.distance_to_point(piece.end()));
-        assert!(off < 0.02, "{piece:?} on {wall:?}");
-    }
 }

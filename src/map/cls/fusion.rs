@@ -111,11 +111,9 @@ impl LineTable {
         let numbers = walls
             .iter()
             .map(|&w| {
-                let known = store
-                    .resolve(w)
-                    .is_some_and(|w| self.entries.contains_key(&w));
-                fused += usize::from(known);
+                let first_new = self.lines.len();
                 let k = self.wall_entry(w, store)?;
+                fused += usize::from((k as usize) < first_new);
                 self.moved[k as usize] = true;
                 Some(k)
             })
