@@ -419,6 +419,10 @@ impl MapperConfig {
             ("max_search_radius", lc.max_search_radius),
             ("heading_margin", lc.heading_margin),
             ("heading_drift_per_metre", lc.heading_drift_per_metre),
+            (
+                "vote_heading_drift_per_metre",
+                lc.vote_heading_drift_per_metre,
+            ),
             ("min_matched_length", lc.min_matched_length),
             ("max_free_space_conflict", lc.max_free_space_conflict),
             ("free_space_tolerance", lc.free_space_tolerance),
