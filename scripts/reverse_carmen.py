@@ -56,7 +56,7 @@ def main() -> int:
     with open(args.relations) as src, open(args.out_relations, "x") as out:
         for number, line in enumerate(src, 1):
             fields = line.split()
-            if not fields:
+            if not fields or fields[0].startswith("#"):
                 continue
             try:
                 t1, t2, x, y, _z, _roll, _pitch, yaw = (float(v) for v in fields[:8])
