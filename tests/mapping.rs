@@ -137,6 +137,22 @@ fn thinned(records: Vec<ScanRecord>, travel: f64, turn: f64) -> Vec<ScanRecord> 
         .collect()
 }
 
+/// Maps `records` offline (the CLS map rebuilt once at the end, as `map`
+/// does) and scores the trajectory on `relations`.
+fn map_and_score(
+    records: &[ScanRecord],
+    relations: &[Relation],
+    config: MapperConfig,
+) -> RelationErrors {
+    let mut mapper = Mapper::new(config);
+    mapper.defer_cls_rebuild();
+    for r in records {
+        mapper.process(r);
+    }
+    mapper.settle();
+    evaluate(mapper.trajectory(), relations)
+}
+
 /// The whole log with the defaults, thinned to the spacings GMapping keeps
 /// (0.5 m / 0.5 rad) and to that of a second building's log (0.7 m and 23°
 /// apart), scored on the relations whose ends remain. At 0.7 m / 0.4 rad
@@ -167,14 +183,7 @@ fn csail_thinned_as_gmapping_keeps_scans_stays_consistent() {
         (0.5, 0.7, MapperConfig::default(), 0.1),
     ] {
         let (records, relations) = csail_head(&dir, usize::MAX);
-        let records = thinned(records, travel, turn);
-        let mut mapper = Mapper::new(config);
-        mapper.defer_cls_rebuild();
-        for r in &records {
-            mapper.process(r);
-        }
-        mapper.settle();
-        let e = evaluate(mapper.trajectory(), &relations);
+        let e = map_and_score(&thinned(records, travel, turn), &relations, config);
         show(&format!("thinned to {travel} m / {turn} rad"), &e);
         assert!(e.used >= 30, "{e:?}");
         assert!(e.translation_m.mean < bar, "{travel} m / {turn} rad: {e:?}");
@@ -204,13 +213,7 @@ fn csail_at_one_degree_thinned_takes_no_quarter_turn_loop() {
     for (travel, turn) in [(0.3, 0.2), (0.5, 0.4), (0.7, 0.2)] {
         let (records, relations) = csail_head(&dir, usize::MAX);
         let records = thinned(at_one_degree(records), travel, turn);
-        let mut mapper = Mapper::new(MapperConfig::default());
-        mapper.defer_cls_rebuild();
-        for r in &records {
-            mapper.process(r);
-        }
-        mapper.settle();
-        let e = evaluate(mapper.trajectory(), &relations);
+        let e = map_and_score(&records, &relations, MapperConfig::default());
         show(&format!("1°, thinned to {travel} m / {turn} rad"), &e);
         assert!(e.used >= 30, "{e:?}");
         assert!(e.translation_m.mean < 0.1, "{travel} m / {turn} rad: {e:?}");
