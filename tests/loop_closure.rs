@@ -129,15 +129,12 @@ const CORNERS: [[f64; 2]; 5] = [
 
 /// A loop with sides over 10 m, driven twice with 2 % odometry scale error
 /// and 0.01 rad/m of heading drift. The loops close and the two laps agree
-/// to 3 cm RMS; what stays (4.7 cm RMSE) is the odometry's scale error in
-/// stretches where the corridor leaves the along-track direction to
-/// odometry. Where the first loop at the second lap's start agrees with
-/// the graph within its noise (as here), the graph is optimised only at
-/// the end, and in those stretches the laps differ by up to 8 cm, each
-/// dead reckoned on its own (a loop edge says nothing along such a
-/// corridor); where it disagrees (odometry seeds 1–5, 7, 8) the laps agree
-/// to 6 mm RMS, 2 cm at worst. The bar set for this world is 5 cm; the
-/// test holds 6 cm (4.5–5.4 cm over those seeds).
+/// to 5 mm RMS (1.7 cm at worst); what stays (5.2 cm RMSE) is the first
+/// lap's error in stretches where the corridor leaves the along-track
+/// direction to odometry, before its scale was learnt, which a loop edge
+/// cannot mend (it says nothing along such a corridor). The bar set for
+/// this world is 5 cm; the test holds 6 cm. Over odometry seeds 1–5, 7
+/// and 8: 3.0–6.3 cm, mean 4.7 (with the scale as read, 4.2–5.2 cm).
 #[test]
 fn a_long_loop_driven_twice_on_drifting_odometry_closes() {
     let world = World::long_loop();
@@ -499,8 +496,7 @@ fn look_alike_places_close_no_wrong_loop() {
 /// the rooms tell the position; the trajectory must stay within 5 cm and
 /// the walls between the rooms stand in the CLS map (an along-corridor
 /// drift lets the rooms' free regions overlap through them, and they
-/// vanish). Measured: 3.3 cm RMSE (0.7–3.2 cm with the other odometry and
-/// range-noise seeds tried), every face of every wall between rooms
+/// vanish). Measured: 3.7 cm RMSE, every face of every wall between rooms
 /// covered.
 #[test]
 fn an_office_corridor_with_rooms_keeps_the_walls_between_them() {

@@ -224,6 +224,13 @@ fn csail_at_one_degree_thinned_takes_no_quarter_turn_loop() {
 /// (36 m) with odometry that over-reads distance by 3 % and drifts 1° per
 /// metre; the mapper must stay far closer to the truth than the odometry,
 /// both step by step and around the whole loop.
+///
+/// The first side's walls show nothing along x until the block's far
+/// corner comes within range, so its first metres are dead reckoned and
+/// mapped about 6 cm long. Once the odometry's scale is learnt the other
+/// sides keep that error; read as is, the opposite side's over-reading
+/// happened to cancel it (2 cm against 7 cm at the end), and no loop
+/// closes on one lap to mend it.
 #[test]
 fn simulated_loop_with_biased_odometry() {
     let world = World::loop_around_block();
@@ -262,6 +269,7 @@ fn simulated_loop_with_biased_odometry() {
         })
         .collect();
     let n = gt.len();
+    let steps = relations.len();
     for k in (n - 60..n).step_by(10) {
         relations.push(Relation {
             t1: gt[0].0,
@@ -276,8 +284,10 @@ fn simulated_loop_with_biased_odometry() {
     eprintln!("{:#?}", mapper.summary());
     assert_eq!(by_mapper.used, relations.len());
     assert!(by_mapper.translation_m.mean < 0.2 * by_odometry.translation_m.mean);
-    assert!(by_mapper.translation_m.max < 0.05, "{by_mapper:?}");
+    assert!(by_mapper.translation_m.max < 0.08, "{by_mapper:?}");
     assert!(by_mapper.rotation_deg.max < 1.0, "{by_mapper:?}");
+    let step_by_step = evaluate(mapper.trajectory(), &relations[..steps]);
+    assert!(step_by_step.translation_m.max < 0.02, "{step_by_step:?}");
     // Closing the loop: the final pose agrees with the first one (the
     // odometry alone ends metres away: 3 % of 36 m and 36° of heading).
     let last = mapper.trajectory().last().unwrap().1;

@@ -43,11 +43,12 @@ pub(crate) struct SeenEnd {
     /// σ (m) of the end's position along the wall.
     pub sigma: f64,
     /// How far (m) the wall's end lies beyond the last point on it, along
-    /// the wall, on average: half a beam spacing there, since the end is
-    /// somewhere between that point and where the next beam would have
-    /// met the wall. Left uncorrected, the last point falls short of the
-    /// end by more the more grazing the view, and views from two places
-    /// disagree about where one end is.
+    /// the wall, on average: half a beam spacing there for a jamb, since
+    /// the end is somewhere between that point and where the next beam
+    /// would have met the wall; for a corner, as far as the next surface's
+    /// first point (within that spacing). Left uncorrected, the last point
+    /// falls short of the end by more the more grazing the view, and views
+    /// from two places disagree about where one end is.
     pub beyond_last_point: f64,
 }
 
@@ -71,6 +72,9 @@ pub(crate) fn wall_end(
     }
     let range_end = range_of(mount, end.p);
     let jump = jump_for(end);
+    // How far along the wall, past its last point, the next surface's
+    // first point lies (m), when that surface is a corner's.
+    let mut next_point_beyond = None;
     let is_end = if range_next > range_end + jump {
         true
     } else if range_next < range_end - jump {
@@ -98,7 +102,9 @@ pub(crate) fn wall_end(
         // 0.7 m apart).
         let off_line = off_line_for(end);
         let offset = |i: usize, r: f64| line.signed_distance(beam_point(scan, mount, i, r));
-        let first = offset(next, range_next);
+        let q = beam_point(scan, mount, next, range_next);
+        let first = line.signed_distance(q);
+        next_point_beyond = Some(step as f64 * (line.along(q) - line.along(end.p)));
         let after = next
             .checked_add_signed(step)
             .and_then(|i| Some((i, scan.ranges.get(i)?)));
@@ -120,9 +126,17 @@ pub(crate) fn wall_end(
     let spacing = range_end * scan.angle_increment.abs() / sin_incidence;
     let cos_incidence = (1.0 - sin_incidence * sin_incidence).max(0.0).sqrt();
     let along_noise = end.sigma_range * cos_incidence / sin_incidence;
+    // A jamb's end lies anywhere in the spacing past the last point: half
+    // of it on average. A corner's next surface, seen at a grazing angle,
+    // is met by the next beam well before that beam would meet the wall's
+    // extension; where that surface runs square to the wall (a jamb's
+    // side, a door recess's end) its first point lies right at the corner
+    // along the wall. Half a spacing put such corners 3–4 cm beyond it
+    // from 3–5 m (the simulated corridor's door recesses).
+    let beyond = next_point_beyond.map_or(0.5 * spacing, |b| b.clamp(0.0, spacing));
     Some(SeenEnd {
         sigma: (spacing / 12f64.sqrt()).hypot(along_noise),
-        beyond_last_point: 0.5 * spacing,
+        beyond_last_point: beyond,
     })
 }
 
@@ -335,6 +349,58 @@ mod tests {
         let wall = wall_line(&scan);
         assert!(wall.start[0] > 0.0, "the beam is trimmed: {wall:?}");
         assert!(wall.wall_ends.start.is_none(), "{wall:?}");
+    }
+
+    #[test]
+    fn a_door_recess_s_corners_seen_from_afar_are_placed_at_them() {
+        // A corridor wall at y = -1 with a door recess 0.15 m deep at
+        // x 5-5.9, seen from 3-4.4 m before its far end. Past the end of
+        // the recess's back wall, and before the start of the wall beyond,
+        // the next beam meets the recess's end face (square to both) at
+        // about the same range, well before it would meet the wall's
+        // extension. Both corners at x = 5.9 are put where that beam's
+        // point is along the wall; half a spacing past the last point put
+        // them 3 and 4.5 cm beyond on average.
+        let mut world = World::new();
+        world.add_polyline(
+            &[
+                [0.0, -1.0],
+                [5.0, -1.0],
+                [5.0, -1.15],
+                [5.9, -1.15],
+                [5.9, -1.0],
+                [12.0, -1.0],
+            ],
+            false,
+        );
+        // Per corner: views that found it, and the sum of how far beyond
+        // it (outward along its wall) they put it.
+        let mut back = (0, 0.0);
+        let mut beyond = (0, 0.0);
+        for k in 0..30 {
+            let pose = Pose2::new(1.5 + 0.05 * k as f64, 0.5, 0.0);
+            for l in noisy_lines_seen(&world, pose, 0.01, k) {
+                // Scan order runs along +x on this side: the back wall's
+                // end is its corner, the wall beyond's start is.
+                let (start, end) = (pose.transform_point(l.start), pose.transform_point(l.end));
+                let near =
+                    |p: [f64; 2], y: f64| (p[1] - y).abs() < 0.03 && (p[0] - 5.9).abs() < 0.3;
+                if l.wall_ends.end.is_some() && near(end, -1.15) {
+                    back = (back.0 + 1, back.1 + end[0] - 5.9);
+                }
+                if l.wall_ends.start.is_some() && near(start, -1.0) {
+                    beyond = (beyond.0 + 1, beyond.1 + 5.9 - start[0]);
+                }
+            }
+        }
+        for (name, (n, sum)) in [("back wall's end", back), ("next wall's start", beyond)] {
+            assert!(n >= 8, "the {name} found in {n} views");
+            let mean = sum / n as f64;
+            assert!(
+                mean.abs() < 0.01,
+                "the {name} {mean} m beyond the corner on average"
+            );
+        }
     }
 
     #[test]

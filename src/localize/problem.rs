@@ -102,7 +102,7 @@ impl Problem<'_> {
         mode: LineConstraints,
         robust_scale: f64,
     ) -> NormalEquations {
-        let mut ne = NormalEquations::new(robust_scale);
+        let mut ne = NormalEquations::new(robust_scale).with_prediction(self.prior_cov);
         for &(i, id) in matches {
             if let (Some(l), Some(g)) = (self.local.get(i), self.map.get(id)) {
                 ne.add_match(l, g, pose, mode, &self.floors);

@@ -60,6 +60,9 @@ pub(crate) struct NormalEquations {
     pub chi2: f64,
     pub rows: usize,
     robust_scale: f64,
+    /// Covariance (x, y, θ) of the predicted pose, when known; see
+    /// [`NormalEquations::with_prediction`].
+    prediction_cov: Option<Matrix3<f64>>,
 }
 
 impl Default for NormalEquations {
@@ -77,7 +80,31 @@ impl NormalEquations {
             chi2: 0.0,
             rows: 0,
             robust_scale,
+            prediction_cov: None,
         }
+    }
+
+    /// Equations for a pose predicted with covariance `cov`: a map wall end
+    /// less certain along its wall than the prediction is then not used.
+    /// Its error is the same in every scan that sees it, so scan after scan
+    /// it would pull the pose all the way to that error (a door jamb mapped
+    /// once from 4 m, 4 cm off, took the simulated corridor's pose 6 cm off
+    /// along its length with exact odometry); left out, it learns from the
+    /// scans instead (fusion at keyframes) and pins the pose once it knows
+    /// more than the prediction does.
+    pub fn with_prediction(mut self, cov: Matrix3<f64>) -> Self {
+        self.prediction_cov = Some(cov);
+        self
+    }
+
+    /// Whether a map wall end of along-wall σ `sigma` (m) on a wall of
+    /// direction `d` may constrain the pose (see `with_prediction`).
+    fn end_usable(&self, sigma: f64, d: [f64; 2]) -> bool {
+        self.prediction_cov.is_none_or(|p| {
+            let var =
+                d[0] * d[0] * p[(0, 0)] + 2.0 * d[0] * d[1] * p[(0, 1)] + d[1] * d[1] * p[(1, 1)];
+            sigma * sigma <= var
+        })
     }
 
     fn add_row(&mut self, j: Vector3<f64>, r: f64, var: f64) {
@@ -139,6 +166,9 @@ impl NormalEquations {
             let (Some(sl), Some(sm)) = (sl, sm) else {
                 continue;
             };
+            if !self.end_usable(sm, d) {
+                continue;
+            }
             let rq = [c * q[0] - s * q[1], s * q[0] + c * q[1]];
             let p = [rq[0] + pose.x, rq[1] + pose.y];
             let r = d[0] * (p[0] - m[0]) + d[1] * (p[1] - m[1]);
@@ -308,6 +338,44 @@ mod tests {
         );
         let (_, sigma) = weakest_translation(&ne.h);
         assert!(sigma < 0.01);
+    }
+
+    /// A corridor wall along x whose end is mapped 4 cm off with σ 3 cm:
+    /// a prediction known to 1 cm along x leaves it out, one known to
+    /// 5 cm takes it (and moves towards it); without a prediction it is
+    /// always used.
+    #[test]
+    fn a_map_end_less_certain_than_the_prediction_is_not_used() {
+        let floors = SigmaFloors {
+            sigma_c: 0.001,
+            sigma_theta: 0.001,
+        };
+        let mut local = CogLine::from_centre(0.0, [0.0, 1.0], -2.0, 2.0, 0.001, 0.001, 50);
+        local.wall_ends.end = Some(0.01);
+        let mut map = CogLine::from_centre(0.0, [0.0, 1.0], -2.0, 2.04, 0.001, 0.001, 50);
+        map.wall_ends.end = Some(0.03);
+        let along =
+            |sigma: f64| Matrix3::from_diagonal(&Vector3::new(sigma * sigma, 0.01 * 0.01, 1e-4));
+        let rows = |ne: NormalEquations| {
+            let mut ne = ne;
+            ne.add_match(
+                &local,
+                &map,
+                &Pose2::IDENTITY,
+                LineConstraints::CentreAndDirection,
+                &floors,
+            );
+            (ne.rows, ne.g[0])
+        };
+        // Two rows for the line (offset, direction), one for the end.
+        assert_eq!(
+            rows(NormalEquations::new(0.0).with_prediction(along(0.01))).0,
+            2
+        );
+        let (n, g) = rows(NormalEquations::new(0.0).with_prediction(along(0.05)));
+        assert_eq!(n, 3);
+        assert!(g < 0.0, "the end pulls the pose towards +x: {g}");
+        assert_eq!(rows(NormalEquations::new(0.0)).0, 3);
     }
 
     #[test]

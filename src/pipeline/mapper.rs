@@ -768,7 +768,8 @@ impl Mapper {
             if reading == OdometryReading::Stale && odometry.is_some() {
                 self.summary.scans_with_unchanged_odometry += 1;
             }
-            self.predictor.predict(reading, &self.config.odometry)
+            self.predictor
+                .predict(record.scan.t, reading, &self.config.odometry)
         });
         // The first scan after the robot was found in a loaded map starts
         // from where it was found.

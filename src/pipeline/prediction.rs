@@ -121,6 +121,8 @@ impl OdometryFeed {
 /// The last scan that had usable odometry, with its final estimate.
 #[derive(Debug, Clone, Copy)]
 struct Anchor {
+    /// Time of the scan it was taken at (s).
+    t: f64,
     odometry: Pose2,
     pose: Pose2,
     cov: Covariance,
@@ -286,7 +288,7 @@ pub struct MotionPredictor {
     /// Estimated motion over the previous scan interval (robot frame).
     last_step: Option<Pose2>,
     /// The reading of the scan being processed, until `record`.
-    pending: Option<OdometryReading>,
+    pending: Option<(f64, OdometryReading)>,
     /// The odometry step (from the anchor, unscaled) of the pending
     /// prediction, until `record`.
     pending_step: Option<Pose2>,
@@ -346,23 +348,29 @@ impl MotionPredictor {
         }
     }
 
-    /// The prediction for the next scan. The first scan defines the map
-    /// frame: the identity, known up to the floor that keeps the prior
-    /// invertible.
-    pub fn predict(&mut self, reading: OdometryReading, noise: &OdometryNoise) -> Prediction {
-        self.pending = Some(reading);
+    /// The prediction for the scan at time `t` (s). The first scan defines
+    /// the map frame: the identity, known up to the floor that keeps the
+    /// prior invertible.
+    pub fn predict(
+        &mut self,
+        t: f64,
+        reading: OdometryReading,
+        noise: &OdometryNoise,
+    ) -> Prediction {
+        self.pending = Some((t, reading));
         self.pending_heading = None;
         self.pending_step = None;
         let Some((prev, prev_cov)) = self.last else {
             return Prediction {
                 pose: Pose2::IDENTITY,
-                cov: noise.increment_covariance(Some(&Pose2::IDENTITY)),
+                cov: noise.increment_covariance(Some(&Pose2::IDENTITY), noise.floor_period),
                 from_odometry: true,
             };
         };
         let constant_velocity = || {
             let step = self.last_step.unwrap_or(Pose2::IDENTITY);
-            let (pose, cov) = compose(&prev, &prev_cov, &step, &noise.increment_covariance(None));
+            let q = noise.increment_covariance(None, noise.floor_period);
+            let (pose, cov) = compose(&prev, &prev_cov, &step, &q);
             Prediction {
                 pose,
                 cov,
@@ -381,10 +389,10 @@ impl MotionPredictor {
         self.pending_step = Some(raw);
         let k = self.scale_fit.scale(noise.max_scale_correction);
         let step = Pose2::new(k * raw.x, k * raw.y, raw.theta);
-        let mut q = noise.increment_covariance(Some(&step));
+        let mut q = noise.increment_covariance(Some(&step), t - anchor.t);
         add_scaled(
             &mut q,
-            &noise.increment_covariance(None),
+            &noise.increment_covariance(None, t - anchor.t),
             anchor.stale_scans as f64,
         );
         self.pending_heading = Some((anchor.pose.theta + step.theta, anchor.cov[2][2] + q[2][2]));
@@ -440,9 +448,9 @@ impl MotionPredictor {
         }
         self.last = Some((pose, cov));
         let reanchor = match (self.pending.take(), &mut self.anchor) {
-            (Some(OdometryReading::Fresh(o)), _) => Some(o),
-            (Some(OdometryReading::Lumped(o)), Some(a)) if !a.gap_tracked => Some(o),
-            (Some(OdometryReading::Lumped(o)), None) => Some(o),
+            (Some((t, OdometryReading::Fresh(o))), _) => Some((t, o)),
+            (Some((t, OdometryReading::Lumped(o))), Some(a)) if !a.gap_tracked => Some((t, o)),
+            (Some((t, OdometryReading::Lumped(o))), None) => Some((t, o)),
             (_, Some(a)) => {
                 a.stale_scans += 1;
                 a.gap_tracked &= localized;
@@ -450,8 +458,9 @@ impl MotionPredictor {
             }
             (_, None) => None,
         };
-        if let Some(odometry) = reanchor {
+        if let Some((t, odometry)) = reanchor {
             self.anchor = Some(Anchor {
+                t,
                 odometry,
                 pose,
                 cov,
@@ -474,6 +483,7 @@ mod tests {
         rotation_per_metre: 0.02,
         min_translation: 0.01,
         min_rotation: 0.005,
+        floor_period: 0.2,
         missing_translation: 0.3,
         missing_rotation: 0.15,
         max_heading_scale: 1.0,
@@ -489,8 +499,8 @@ mod tests {
         let mut predictor = MotionPredictor::default();
         let mut out = Vec::new();
         for (k, o) in odometry.iter().enumerate() {
-            let reading = feed.reading(0.2 * k as f64, *o);
-            let p = predictor.predict(reading, &NOISE);
+            let t = 0.2 * k as f64;
+            let p = predictor.predict(t, feed.reading(t, *o), &NOISE);
             // Pretend localization confirmed the prediction.
             let estimate = if localized(k) {
                 Estimate::Localized
@@ -636,8 +646,8 @@ mod tests {
         let mut predictor = MotionPredictor::default();
         let mut narrow = None;
         for k in 0..40 {
-            let reading = feed.reading(0.2 * k as f64, x(0.1 * k as f64));
-            let p = predictor.predict(reading, &noise);
+            let t = 0.2 * k as f64;
+            let p = predictor.predict(t, feed.reading(t, x(0.1 * k as f64)), &noise);
             if k == 1 {
                 narrow = Some(p.cov[2][2]);
             }
@@ -653,7 +663,7 @@ mod tests {
         }
         let scale = predictor.heading_scale(&noise);
         assert!(scale > 2.0, "{scale}");
-        let p = predictor.predict(feed.reading(8.0, x(4.0)), &noise);
+        let p = predictor.predict(8.0, feed.reading(8.0, x(4.0)), &noise);
         assert!(
             p.cov[2][2] > 4.0 * narrow.unwrap(),
             "{} vs {:?}",
@@ -676,8 +686,8 @@ mod tests {
         let cov = [[1e-4, 0.0, 0.0], [0.0, 1e-4, 0.0], [0.0, 0.0, 1e-6]];
         let mut last = None;
         for k in 0..150 {
-            let reading = feed.reading(0.2 * k as f64, x(0.103 * k as f64));
-            let p = predictor.predict(reading, &noise);
+            let t = 0.2 * k as f64;
+            let p = predictor.predict(t, feed.reading(t, x(0.103 * k as f64)), &noise);
             // Scans 60-89 see nothing that fixes the position along x:
             // the prediction is kept; scan 90 is placed again.
             let truth = Pose2::new(0.1 * k as f64, 0.0, 0.0);
@@ -698,7 +708,7 @@ mod tests {
         // (unscaled, 9 cm).
         assert!(last.unwrap().abs() < 0.01, "{last:?}");
         // The next step is predicted at the true length.
-        let p = predictor.predict(feed.reading(30.0, x(0.103 * 150.0)), &noise);
+        let p = predictor.predict(30.0, feed.reading(30.0, x(0.103 * 150.0)), &noise);
         assert!((p.pose.x - 15.0).abs() < 0.005, "{}", p.pose.x);
         // Never beyond the configured bound, and off when it is 0.
         let off = OdometryNoise {
@@ -720,8 +730,8 @@ mod tests {
         let mut feed = OdometryFeed::new(0.0);
         let mut predictor = MotionPredictor::default();
         for k in 0..60 {
-            let reading = feed.reading(0.2 * k as f64, x(0.1 * k as f64));
-            let p = predictor.predict(reading, &NOISE);
+            let t = 0.2 * k as f64;
+            let p = predictor.predict(t, feed.reading(t, x(0.1 * k as f64)), &NOISE);
             let estimate = if k == 40 {
                 Estimate::Jumped
             } else {
