@@ -87,9 +87,9 @@ impl NormalEquations {
     /// Equations for a pose predicted with covariance `cov`: a map wall end
     /// less certain along its wall than the prediction is then not used.
     /// Its error is the same in every scan that sees it, so scan after scan
-    /// it would pull the pose all the way to that error (a door jamb mapped
-    /// once from 4 m, 4 cm off, took the simulated corridor's pose 6 cm off
-    /// along its length with exact odometry); left out, it learns from the
+    /// it would pull the pose all the way to that error (a wall end past a
+    /// door recess, mapped from 4–5 m 4 cm off, took the simulated
+    /// corridor's pose 6 cm off along it with exact odometry); left out, it learns from the
     /// scans instead (fusion at keyframes) and pins the pose once it knows
     /// more than the prediction does.
     pub fn with_prediction(mut self, cov: Matrix3<f64>) -> Self {
