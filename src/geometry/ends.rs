@@ -253,6 +253,24 @@ mod tests {
         noisy_lines_seen(world, pose, 0.0, 1)
     }
 
+    /// A corridor wall at y = -1 from x = 0 to 12 with a door recess 0.9 m
+    /// wide and 0.15 m deep at x 5–5.9.
+    fn wall_with_door_recess() -> World {
+        let mut world = World::new();
+        world.add_polyline(
+            &[
+                [0.0, -1.0],
+                [5.0, -1.0],
+                [5.0, -1.15],
+                [5.9, -1.15],
+                [5.9, -1.0],
+                [12.0, -1.0],
+            ],
+            false,
+        );
+        world
+    }
+
     /// The lines (robot frame) of a 0.5° scan from `pose` with range noise
     /// `sigma` (m), drawn from `seed`.
     fn noisy_lines_seen(world: &World, pose: Pose2, sigma: f64, seed: u64) -> Vec<CogLine> {
@@ -361,18 +379,7 @@ mod tests {
         // extension. Both corners at x = 5.9 are put where that beam's
         // point is along the wall; half a spacing past the last point put
         // them 3 and 4.5 cm beyond on average.
-        let mut world = World::new();
-        world.add_polyline(
-            &[
-                [0.0, -1.0],
-                [5.0, -1.0],
-                [5.0, -1.15],
-                [5.9, -1.15],
-                [5.9, -1.0],
-                [12.0, -1.0],
-            ],
-            false,
-        );
+        let world = wall_with_door_recess();
         // Per corner: views that found it, and the sum of how far beyond
         // it (outward along its wall) they put it.
         let mut back = (0, 0.0);
@@ -409,18 +416,7 @@ mod tests {
         // with a 0.9 m recess 0.15 m deep, x 5–5.9), facing it: past each
         // wall's end the next beams run along the jamb's side, too short
         // for a line, the first of them only a beam spacing off the wall.
-        let mut world = World::new();
-        world.add_polyline(
-            &[
-                [0.0, -1.0],
-                [5.0, -1.0],
-                [5.0, -1.15],
-                [5.9, -1.15],
-                [5.9, -1.0],
-                [12.0, -1.0],
-            ],
-            false,
-        );
+        let world = wall_with_door_recess();
         // Over views across the doorway, about half the jambs are found
         // (35 of 66; the next beam alone found 5: a beam spacing off the
         // wall is within its noise; the rest are lost where the split or

@@ -389,10 +389,11 @@ impl MotionPredictor {
         self.pending_step = Some(raw);
         let k = self.scale_fit.scale(noise.max_scale_correction);
         let step = Pose2::new(k * raw.x, k * raw.y, raw.theta);
-        let mut q = noise.increment_covariance(Some(&step), t - anchor.t);
+        let period = t - anchor.t;
+        let mut q = noise.increment_covariance(Some(&step), period);
         add_scaled(
             &mut q,
-            &noise.increment_covariance(None, t - anchor.t),
+            &noise.increment_covariance(None, period),
             anchor.stale_scans as f64,
         );
         self.pending_heading = Some((anchor.pose.theta + step.theta, anchor.cov[2][2] + q[2][2]));
