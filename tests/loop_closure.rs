@@ -129,12 +129,12 @@ const CORNERS: [[f64; 2]; 5] = [
 
 /// A loop with sides over 10 m, driven twice with 2 % odometry scale error
 /// and 0.01 rad/m of heading drift. The loops close and the two laps agree
-/// to 5 mm RMS (1.7 cm at worst); what stays (5.2 cm RMSE) is the first
-/// lap's error in stretches where the corridor leaves the along-track
-/// direction to odometry, before its scale was learnt, which a loop edge
-/// cannot mend (it says nothing along such a corridor). The bar set for
-/// this world is 5 cm; the test holds 6 cm. Over odometry seeds 1–5, 7
-/// and 8: 3.0–6.3 cm, mean 4.7 (with the scale as read, 4.2–5.2 cm).
+/// to 1.6 cm RMS; what stays (3.7 cm RMSE) is mostly the whole map turned
+/// by about 0.1° against the first pose (1.2 cm after a rigid
+/// alignment): the heading the fixes of the first metres settled on.
+/// The bar set for this world is 5 cm. Over odometry seeds 1–5, 7, 8 and
+/// 11: 2.8–4.0 cm, mean 3.3 (with the heading drift as read, 3.0–6.4 cm,
+/// mean 4.7).
 #[test]
 fn a_long_loop_driven_twice_on_drifting_odometry_closes() {
     let world = World::long_loop();
@@ -168,7 +168,7 @@ fn a_long_loop_driven_twice_on_drifting_odometry_closes() {
         "{kept} kept of {taken}"
     );
     assert!(stats.optimisations >= 1, "{stats:?}");
-    assert!(rmse <= 0.06, "RMSE {rmse} m");
+    assert!(rmse <= 0.05, "RMSE {rmse} m");
     assert!(rmse < 0.7 * rmse_open, "{rmse} vs {rmse_open} without");
     assert!(worst_heading < 0.02, "{worst_heading} rad");
     // The two laps agree where they pass the same place.

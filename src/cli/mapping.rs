@@ -84,6 +84,12 @@ pub fn map(
             summary.odometry_scale
         );
     }
+    if config.odometry.max_heading_drift > 0.0 {
+        println!(
+            "  odometry heading drift:     {:+.4} rad/m added (learnt from the localized scans)",
+            summary.odometry_heading_drift
+        );
+    }
     println!(
         "  mean time per scan:         {:.1} µs (extraction {:.1}, localization {:.1}; per keyframe: segment map {:.1}, CLS map {:.1})",
         t.per_scan_us, t.extract_us, t.localize_us, t.map_update_us, t.cls_update_us

@@ -341,6 +341,7 @@ impl Mapper {
         s.loops = self.graph.stats().clone();
         s.odometry_heading_scale = self.predictor.heading_scale(&self.config.odometry);
         s.odometry_scale = self.predictor.odometry_scale(&self.config.odometry);
+        s.odometry_heading_drift = self.predictor.odometry_heading_drift(&self.config.odometry);
         s.mean_time = self.clocks.means();
         s
     }

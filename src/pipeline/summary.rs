@@ -162,6 +162,9 @@ pub struct MappingSummary {
     /// Factor on the odometry's distances learnt at the end of the run
     /// (1: taken as read; see `OdometryNoise::max_scale_correction`).
     pub odometry_scale: f64,
+    /// The heading drift added to the odometry's turns (rad/m; 0: taken
+    /// as read; see `OdometryNoise::max_heading_drift`).
+    pub odometry_heading_drift: f64,
     /// Scans localized from a searched heading because nothing matched
     /// from the odometry's (see `LocalizerConfig::heading_search`).
     pub heading_searches: usize,
