@@ -27,6 +27,9 @@ import time
 STX = 0x02
 ACK = 0x06
 NAK = 0x15
+# Longest quiet inside a sensor telegram before it counts as cut (s): the
+# listing allows 14 ms between bytes; the rest is slack for a loaded host.
+FRAME_GAP = 0.25
 
 SPEEDS = {
     9600: (termios.B9600, 0x42),
@@ -110,7 +113,16 @@ class Port:
                     continue
                 total = 4 + length + 2
                 if len(self.buf) < total:
-                    break
+                    # A request cuts the telegram on the line short (the
+                    # stop of a stream, say): when the line goes quiet
+                    # inside a frame, it was cut, and the next telegram
+                    # starts inside the bytes it claimed.
+                    quiet = min(deadline, time.monotonic() + FRAME_GAP)
+                    if not self.fill(quiet):
+                        if time.monotonic() >= deadline:
+                            return None, bytes(skipped)
+                        skipped.append(self.buf.pop(0))
+                    continue
                 frame = bytes(self.buf[:total])
                 crc = frame[-2] | (frame[-1] << 8)
                 if crc16(frame[:-2]) == crc:
