@@ -560,7 +560,11 @@ fn a_saved_map_is_localized_in_and_extended() {
         "kidnapped: {} relocalizations, worst error 40 scans on: {worst:.3} m",
         carried.summary().relocalizations
     );
-    assert!(worst < 0.3, "{worst}");
+    // The pose is found some 20 cm off and takes some 45 scans to come
+    // in: 0.287 m here before jambs were followed from scan to scan,
+    // 0.305 m since (the first run's trajectory, the reference, moved
+    // with it).
+    assert!(worst < 0.33, "{worst}");
 
     let mut extended = Mapper::from_map(
         MapperConfig::default(),

@@ -43,13 +43,30 @@ pub(crate) struct SeenEnd {
     /// σ (m) of the end's position along the wall.
     pub sigma: f64,
     /// How far (m) the wall's end lies beyond the last point on it, along
-    /// the wall, on average: half a beam spacing there for a jamb, since
-    /// the end is somewhere between that point and where the next beam
-    /// would have met the wall; for a corner, as far as the next surface's
+    /// the wall, on average: for a jamb, to the middle of its gap (about
+    /// half a beam spacing), since the end is somewhere between that point
+    /// and where the next beam would have met the wall; for a corner, as
+    /// far as the next surface's
     /// first point (within that spacing). Left uncorrected, the last point
     /// falls short of the end by more the more grazing the view, and views
     /// from two places disagree about where one end is.
     pub beyond_last_point: f64,
+    /// For a jamb: where the last beam on the wall and the next beam past
+    /// its end cross the line (m along it, see [`CogLine::along`]), and
+    /// the σ (m) along the line of both crossings from the line's offset
+    /// error. The end lies between them.
+    pub gap: Option<JambGap>,
+}
+
+/// The gap a jamb lies in, as one scan sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JambGap {
+    /// Where the last beam on the wall crosses its line (m along it).
+    pub last: f64,
+    /// Where the next beam, past the end, crosses it (m along it).
+    pub past: f64,
+    /// σ (m) of both along the line, from the line's offset error.
+    pub sigma: f64,
 }
 
 /// The end of `line` at its fitted point `end`, if that end is a true end
@@ -75,7 +92,8 @@ pub(crate) fn wall_end(
     // How far along the wall, past its last point, the next surface's
     // first point lies (m), when that surface is a corner's.
     let mut next_point_beyond = None;
-    let is_end = if range_next > range_end + jump {
+    let jamb = range_next > range_end + jump;
+    let is_end = if jamb {
         true
     } else if range_next < range_end - jump {
         // Something nearer: an occlusion. (A concave corner whose next
@@ -121,6 +139,11 @@ pub(crate) fn wall_end(
         return None;
     }
     let sin_incidence = incidence_ok(end, line)?;
+    if jamb {
+        let origin = [mount.x, mount.y];
+        let next_beam = beam_direction(scan, mount, next);
+        return jamb_end(line, origin, end, next_beam, step, sin_incidence);
+    }
     // Uniform over one beam spacing on the wall, plus the range noise
     // projected along it.
     let spacing = range_end * scan.angle_increment.abs() / sin_incidence;
@@ -137,7 +160,56 @@ pub(crate) fn wall_end(
     Some(SeenEnd {
         sigma: (spacing / 12f64.sqrt()).hypot(along_noise),
         beyond_last_point: beyond,
+        gap: None,
     })
+}
+
+/// A jamb's end: somewhere between where the last beam on the wall and
+/// the next beam, which passed its end, cross the fitted line (`origin`
+/// the sensor, `next_beam` that beam's direction); uniform over that gap,
+/// plus the line's own offset error there carried along it at the beams'
+/// incidence. The beams' directions are exact, so the last point's range
+/// noise does not enter.
+fn jamb_end(
+    line: &CogLine,
+    origin: [f64; 2],
+    end: &ScanPoint,
+    next_beam: [f64; 2],
+    step: isize,
+    sin_incidence: f64,
+) -> Option<SeenEnd> {
+    let crossing = |u: [f64; 2]| {
+        let t = ray_to_line(line, origin, u)?;
+        Some(line.along([origin[0] + t * u[0], origin[1] + t * u[1]]))
+    };
+    let last = crossing(end.beam)?;
+    let past = crossing(next_beam)?;
+    let step = step as f64;
+    let gap = step * (past - last);
+    if gap.is_nan() || gap <= 0.0 {
+        return None;
+    }
+    let from_centre = line.along(end.p);
+    let offset_sigma = line.sigma_c.hypot(from_centre * line.sigma_theta);
+    let cos_incidence = (1.0 - sin_incidence * sin_incidence).max(0.0).sqrt();
+    let along_sigma = offset_sigma * cos_incidence / sin_incidence;
+    Some(SeenEnd {
+        sigma: (gap / 12f64.sqrt()).hypot(along_sigma),
+        beyond_last_point: step * (0.5 * (last + past) - from_centre),
+        gap: Some(JambGap {
+            last,
+            past,
+            sigma: along_sigma,
+        }),
+    })
+}
+
+/// How far (m) the ray from `origin` along unit `u` runs to the infinite
+/// `line`; `None` if it runs parallel to it or away from it.
+fn ray_to_line(line: &CogLine, origin: [f64; 2], u: [f64; 2]) -> Option<f64> {
+    let n = line.normal();
+    let t = -line.signed_distance(origin) / (n[0] * u[0] + n[1] * u[1]);
+    (t.is_finite() && t > 0.0).then_some(t)
 }
 
 /// |sin| of the angle between the beam to `end` and `line`, if not more
@@ -153,10 +225,16 @@ fn range_of(mount: &Pose2, p: [f64; 2]) -> f64 {
     (p[0] - mount.x).hypot(p[1] - mount.y)
 }
 
+/// Robot-frame unit direction of beam `i` of `scan`.
+fn beam_direction(scan: &RangeScan, mount: &Pose2, i: usize) -> [f64; 2] {
+    let (s, c) = (scan.angle(i) + mount.theta).sin_cos();
+    [c, s]
+}
+
 /// Robot-frame point of beam `i` of `scan` at range `r` (m).
 fn beam_point(scan: &RangeScan, mount: &Pose2, i: usize, r: f64) -> [f64; 2] {
-    let (s, c) = (scan.angle(i) + mount.theta).sin_cos();
-    [mount.x + r * c, mount.y + r * s]
+    let u = beam_direction(scan, mount, i);
+    [mount.x + r * u[0], mount.y + r * u[1]]
 }
 
 /// Range step (m) read as a jump next to `end`.
@@ -240,6 +318,7 @@ fn face_corner(
     sigma.is_finite().then_some(SeenEnd {
         sigma,
         beyond_last_point: beyond,
+        gap: None,
     })
 }
 

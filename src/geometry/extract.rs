@@ -5,7 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::cog_line::{CogLine, WallEnds};
-use super::ends::wall_end;
+use super::ends::{JambGap, wall_end};
 use super::fit::{PrefixMoments, cog_line};
 use super::points::{ScanPoint, collect_points};
 use super::pose::Pose2;
@@ -142,12 +142,31 @@ pub struct LineExtractor {
     chord_spans: Vec<Span>,
     spans: Vec<Span>,
     stack: Vec<Span>,
+    jambs: Vec<SeenJamb>,
+}
+
+/// A jamb the last extraction found: at which end of which line, and the
+/// gap it lies in.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SeenJamb {
+    /// Index of the line in the extraction's output.
+    pub line: usize,
+    /// Whether the jamb is the line's start (else its end).
+    pub at_start: bool,
+    /// Where along the line the scan places it.
+    pub gap: JambGap,
 }
 
 impl LineExtractor {
     /// A new extractor with empty buffers.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// The jambs found by the last [`extract`](Self::extract), in the
+    /// order of their lines.
+    pub fn jambs(&self) -> &[SeenJamb] {
+        &self.jambs
     }
 
     /// Extracts the lines of `scan` into `out` (cleared first), robot frame,
@@ -160,6 +179,7 @@ impl LineExtractor {
         out: &mut Vec<CogLine>,
     ) {
         out.clear();
+        self.jambs.clear();
         self.points.clear();
         self.runs.clear();
         self.chord_spans.clear();
@@ -239,6 +259,15 @@ impl LineExtractor {
                 // A corner placed where a face meets the wall may lie a
                 // little before the last point on it.
                 if line.length() >= cfg.min_length {
+                    for (at_start, seen) in [(true, start), (false, end)] {
+                        if let Some(gap) = seen.and_then(|e| e.gap) {
+                            self.jambs.push(SeenJamb {
+                                line: out.len(),
+                                at_start,
+                                gap,
+                            });
+                        }
+                    }
                     out.push(line);
                 }
             }

@@ -15,7 +15,10 @@ pub use cog_line::{CogLine, WallEnds};
 pub use correspond::{
     CorrespondenceConfig, SegmentId, SegmentIndex, lines_correspond, match_score,
 };
-pub use extract::{ExtractionConfig, LineExtractor, RangeNoise, extract_lines, scan_points};
+pub use ends::JambGap;
+pub use extract::{
+    ExtractionConfig, LineExtractor, RangeNoise, SeenJamb, extract_lines, scan_points,
+};
 pub use pose::{Pose2, wrap_angle, wrap_angle_positive};
 pub use scan::{BeamFault, RangeScan};
 

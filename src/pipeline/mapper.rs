@@ -7,6 +7,7 @@ use std::time::Instant;
 use nalgebra::{Matrix3, Vector3};
 use tracing::{debug, trace_span, warn};
 
+use super::jambs::JambTracks;
 use super::offline::SKIPPED_EXAMPLES;
 use super::prediction::{Estimate, MotionPredictor, OdometryFeed, OdometryReading};
 use super::rejection::{Rejection, RejectionKind};
@@ -46,6 +47,8 @@ fn mahalanobis(pose: &Pose2, predicted: &Pose2, cov: &[[f64; 3]; 3]) -> f64 {
 pub struct Mapper {
     config: MapperConfig,
     extractor: LineExtractor,
+    /// The jambs in view, followed from scan to scan.
+    jamb_tracks: JambTracks,
     lines: Vec<CogLine>,
     map: SegmentMap,
     cls: ClsMap,
@@ -118,6 +121,7 @@ impl Mapper {
         Mapper {
             config,
             extractor: LineExtractor::new(),
+            jamb_tracks: JambTracks::default(),
             lines: Vec::new(),
             map: SegmentMap::new(config.map),
             cls: ClsMap::new(config.cls_map()),
@@ -391,6 +395,7 @@ impl Mapper {
     pub fn odometry_restarted(&mut self) {
         self.odometry.restart();
         self.predictor.forget_odometry();
+        self.jamb_tracks.forget();
     }
 
     /// Hands over the poses recorded so far, anchored to their keyframes,
@@ -764,13 +769,15 @@ impl Mapper {
         }
 
         let t = Instant::now();
-        let prediction = trace_span!("predict").in_scope(|| {
+        let (prediction, reading) = trace_span!("predict").in_scope(|| {
             let reading = self.odometry.reading(record.scan.t, odometry);
             if reading == OdometryReading::Stale && odometry.is_some() {
                 self.summary.scans_with_unchanged_odometry += 1;
             }
-            self.predictor
-                .predict(record.scan.t, reading, &self.config.odometry)
+            let prediction = self
+                .predictor
+                .predict(record.scan.t, reading, &self.config.odometry);
+            (prediction, reading)
         });
         // The first scan after the robot was found in a loaded map starts
         // from where it was found.
@@ -789,7 +796,14 @@ impl Mapper {
                 &self.config.laser_mount,
                 &self.config.extraction,
                 &mut self.lines,
-            )
+            );
+            // Only regularly moving odometry carries the jambs' gaps.
+            let moved = match reading {
+                OdometryReading::Fresh(o) if prediction.from_odometry => Some(o),
+                _ => None,
+            };
+            self.jamb_tracks
+                .follow(moved, &mut self.lines, self.extractor.jambs());
         });
         self.clocks.extract.add(t.elapsed());
 

@@ -38,6 +38,7 @@ use crate::geometry::Pose2;
 use crate::input::InputError;
 
 pub mod config;
+mod jambs;
 pub mod mapper;
 pub mod offline;
 pub mod output;
