@@ -90,14 +90,11 @@ impl JambTracks {
             return;
         };
         let back = motion.inverse();
+        let turn = Pose2::new(0.0, 0.0, back.theta);
         let step = motion.x.hypot(motion.y);
-        let (s, c) = (-motion.theta).sin_cos();
         for t in &mut self.tracks {
             let (inner, outer) = (back.transform_point(t.inner), back.transform_point(t.outer));
-            let outward = [
-                c * t.outward[0] - s * t.outward[1],
-                s * t.outward[0] + c * t.outward[1],
-            ];
+            let outward = turn.transform_point(t.outward);
             let range = outer[0].hypot(outer[1]);
             let widen = STEP_SHARE * (step + motion.theta.abs() * range);
             t.inner = [inner[0] - widen * outward[0], inner[1] - widen * outward[1]];
@@ -111,12 +108,11 @@ impl JambTracks {
             let Some(line) = lines.get_mut(jamb.line) else {
                 continue;
             };
-            let sign = if jamb.at_start { -1.0 } else { 1.0 };
-            let d = line.direction();
-            let outward = [sign * d[0], sign * d[1]];
             // Positions outward along the wall (m): the jamb's gap, and
             // the best overlapping track's.
-            let (lo, hi) = (sign * jamb.gap.last, sign * jamb.gap.past);
+            let (sign, lo, hi) = outward_gap(jamb);
+            let d = line.direction();
+            let outward = [sign * d[0], sign * d[1]];
             let slack = GAP_SIGMAS * jamb.gap.sigma;
             let best = self
                 .tracks
@@ -162,13 +158,7 @@ impl JambTracks {
                     (lo, hi)
                 }
             };
-            let point = |u: f64| line_point(line, sign * u);
-            self.next.push(Track {
-                inner: point(inner),
-                outer: point(outer),
-                outward,
-                missed: 0,
-            });
+            self.next.push(Track::on(line, sign, inner, outer));
         }
         // Tracks unseen this scan wait a few scans for their jamb.
         self.next.extend(
@@ -184,16 +174,32 @@ impl JambTracks {
             let Some(line) = lines.get(jamb.line) else {
                 continue;
             };
-            let sign = if jamb.at_start { -1.0 } else { 1.0 };
-            let d = line.direction();
-            self.tracks.push(Track {
-                inner: line_point(line, jamb.gap.last),
-                outer: line_point(line, jamb.gap.past),
-                outward: [sign * d[0], sign * d[1]],
-                missed: 0,
-            });
+            let (sign, lo, hi) = outward_gap(jamb);
+            self.tracks.push(Track::on(line, sign, lo, hi));
         }
     }
+}
+
+impl Track {
+    /// A fresh track of the gap from `inner` to `outer` (m outward along
+    /// `line`; `sign` −1 for a jamb at its start, +1 at its end).
+    fn on(line: &CogLine, sign: f64, inner: f64, outer: f64) -> Track {
+        let d = line.direction();
+        Track {
+            inner: line_point(line, sign * inner),
+            outer: line_point(line, sign * outer),
+            outward: [sign * d[0], sign * d[1]],
+            missed: 0,
+        }
+    }
+}
+
+/// A jamb's gap outward along its line (m): the sign that turns positions
+/// along the line outward (−1 at its start, +1 at its end), and the gap's
+/// inner and outer ends.
+fn outward_gap(jamb: &SeenJamb) -> (f64, f64, f64) {
+    let sign = if jamb.at_start { -1.0 } else { 1.0 };
+    (sign, sign * jamb.gap.last, sign * jamb.gap.past)
 }
 
 /// The point `along` m along `line` from its centre.
