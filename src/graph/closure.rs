@@ -4,6 +4,10 @@
 //!    behind, whose pose lies within the drift the path since them allows
 //!    (`search_margin + drift_per_metre × path`, capped). The pose estimate
 //!    is not trusted beyond that radius, and nothing inside it is ruled out.
+//!    The path is the shortest through the graph ([`drift_paths`]): a loop
+//!    the poses agree with ties its two ends, so the drift since a place
+//!    is the drift since the nearest loop back to it, not since the robot
+//!    was first there.
 //! 2. **Reference**: the walls seen from the candidate and its neighbours
 //!    in the chain, fused into a small segment map (their own poses, which
 //!    agree with each other), never the recent chain's walls, which the
@@ -271,42 +275,121 @@ pub struct LoopQuery<'a> {
     pub poses: &'a [Pose2],
     /// The keyframe to close a loop for (usually the newest).
     pub current: usize,
+    /// Path (m) from each keyframe to `current` through the graph, which
+    /// bounds the drift between their poses ([`drift_paths`]).
+    pub paths: &'a [f64],
     /// Whether the voting search may run for this keyframe.
     pub allow_voting: bool,
+}
+
+/// Path (m) from each keyframe to keyframe `current`: along the chain (the
+/// distance travelled between neighbours), where the loop edges among
+/// `edges` with kernel `weights` of at least one half (the current poses
+/// agree with them) join their ends at no length. The estimate of a place
+/// drifts from the current one by what was driven since the two were last
+/// tied: on thinned CSAIL, windows grown by the whole path since a place
+/// let voting take a parallel corridor 8 m off for a loop 200 m later,
+/// though a loop 45 keyframes back had tied the two sides already.
+pub fn drift_paths(
+    keyframes: &[std::sync::Arc<Keyframe>],
+    edges: &[Edge],
+    weights: &[f64],
+    current: usize,
+) -> Vec<f64> {
+    let n = keyframes.len();
+    let mut ties: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for (e, w) in edges.iter().zip(weights) {
+        if e.kind == EdgeKind::Loop && *w >= 0.5 && e.from < n && e.to < n {
+            ties[e.from].push(e.to);
+            ties[e.to].push(e.from);
+        }
+    }
+    let mut path = vec![f64::INFINITY; n];
+    let Some(start) = path.get_mut(current) else {
+        return path;
+    };
+    *start = 0.0;
+    // Dijkstra; lengths are non-negative, so their bit patterns order as
+    // the values do.
+    let mut queue = std::collections::BinaryHeap::new();
+    queue.push(std::cmp::Reverse((0u64, current)));
+    while let Some(std::cmp::Reverse((bits, i))) = queue.pop() {
+        let d = f64::from_bits(bits);
+        if d > path[i] {
+            continue;
+        }
+        let chain = [i.checked_sub(1), (i + 1 < n).then_some(i + 1)];
+        let steps = chain.into_iter().flatten().map(|j| {
+            let step = (keyframes[j].travelled - keyframes[i].travelled).abs();
+            (j, if step.is_finite() { step } else { 0.0 })
+        });
+        for (j, step) in steps.chain(ties[i].iter().map(|&j| (j, 0.0))) {
+            let dj = d + step;
+            if dj < path[j] {
+                path[j] = dj;
+                queue.push(std::cmp::Reverse((dj.to_bits(), j)));
+            }
+        }
+    }
+    path
+}
+
+/// An earlier keyframe whose place the current one may see again.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoopCandidate {
+    pub keyframe: usize,
+    /// Distance between the two pose estimates (m).
+    pub distance: f64,
+    /// Path driven from it to the current keyframe (m).
+    pub travelled: f64,
+    /// Path through the graph between the two (m; [`drift_paths`]).
+    pub drift_path: f64,
 }
 
 /// Earlier keyframes inside the search window of `current`, nearest
 /// first, at most one per `2 × reference_keyframes + 1` stretch of chain
 /// (neighbours share one reference).
-pub fn loop_candidates(q: &LoopQuery<'_>, cfg: &LoopClosureConfig) -> Vec<(usize, f64, f64)> {
+pub fn loop_candidates(q: &LoopQuery<'_>, cfg: &LoopClosureConfig) -> Vec<LoopCandidate> {
     let Some(cur) = q.poses.get(q.current) else {
         return Vec::new();
     };
     let Some(cur_kf) = q.keyframes.get(q.current) else {
         return Vec::new();
     };
-    let mut found: Vec<(usize, f64, f64)> = Vec::new();
+    let mut found: Vec<LoopCandidate> = Vec::new();
     for (j, (kf, pose)) in q.keyframes.iter().zip(q.poses).enumerate().take(q.current) {
-        let path = cur_kf.travelled - kf.travelled;
-        if path < cfg.min_travel {
+        let travelled = cur_kf.travelled - kf.travelled;
+        if travelled < cfg.min_travel {
             continue;
         }
-        let (radius, heading) = cfg.search_window(path);
-        let d = (pose.x - cur.x).hypot(pose.y - cur.y);
+        let (radius, heading) = cfg.search_window(travelled);
+        let distance = (pose.x - cur.x).hypot(pose.y - cur.y);
         // The heading matters only as far as the views must overlap: a
         // 180° scan seen from the opposite direction shares little.
-        if d <= radius && wrap_angle(pose.theta - cur.theta).abs() <= heading + 1.0 {
-            found.push((j, d, path));
+        if distance <= radius && wrap_angle(pose.theta - cur.theta).abs() <= heading + 1.0 {
+            found.push(LoopCandidate {
+                keyframe: j,
+                distance,
+                travelled,
+                drift_path: q.paths.get(j).map_or(travelled, |p| p.min(travelled)),
+            });
         }
     }
-    found.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+    found.sort_by(|a, b| {
+        a.distance
+            .total_cmp(&b.distance)
+            .then(a.keyframe.cmp(&b.keyframe))
+    });
     let spread = 2 * cfg.reference_keyframes + 1;
-    let mut chosen: Vec<(usize, f64, f64)> = Vec::new();
+    let mut chosen: Vec<LoopCandidate> = Vec::new();
     for c in found {
         if chosen.len() >= cfg.max_candidates {
             break;
         }
-        if chosen.iter().all(|k| k.0.abs_diff(c.0) >= spread) {
+        if chosen
+            .iter()
+            .all(|k| k.keyframe.abs_diff(c.keyframe) >= spread)
+        {
             chosen.push(c);
         }
     }
@@ -382,8 +465,14 @@ pub fn close_loop(
     let current = &q.keyframes[q.current];
     let estimate = q.poses[q.current];
     let mut why = LoopRejection::NoMatch;
-    for (j, _, path) in candidates {
-        let (radius, heading) = cfg.search_window(path);
+    for LoopCandidate {
+        keyframe: j,
+        travelled,
+        drift_path,
+        ..
+    } in candidates
+    {
+        let (radius, heading) = cfg.search_window(travelled);
         let reference = reference_map(q, j, fusion, cfg);
         if reference.is_empty() {
             continue;
@@ -407,23 +496,36 @@ pub fn close_loop(
         let mut runner_up = None;
         if start.is_none() && q.allow_voting {
             let voters = GlobalMap::new(reference.index().iter().map(|(_, l)| *l));
-            if let Ok(result) = global_localize(&current.lines, &voters, global) {
-                let mut inside = result.hypotheses.iter().filter(|h| in_window(&h.pose));
-                if let Some(best) = inside.next() {
-                    let turn = wrap_angle(best.pose.theta - estimate.theta).abs();
-                    if turn > cfg.vote_heading_window(path) {
-                        why = why.max(LoopRejection::ImplausibleTurn);
-                    } else {
-                        start = Some((best.pose, true));
-                        runner_up = inside
-                            .find(|h| {
-                                (h.pose.x - best.pose.x).hypot(h.pose.y - best.pose.y)
-                                    > global.cluster_distance
-                                    || wrap_angle(h.pose.theta - best.pose.theta).abs()
-                                        > global.cluster_angle
-                            })
-                            .map(|h| h.score / best.score.max(1e-9));
-                    }
+            // Voting searches the whole reference, where a rectilinear
+            // building repeats itself: its answer is held to the drift
+            // since the two places were last tied by a loop.
+            let (radius, heading) = cfg.search_window(drift_path);
+            let in_drift = |p: &Pose2| {
+                (p.x - estimate.x).hypot(p.y - estimate.y) <= radius
+                    && wrap_angle(p.theta - estimate.theta).abs() <= heading
+            };
+            if let Ok(result) = global_localize(&current.lines, &voters, global)
+                && let Some(best) = result.hypotheses.iter().find(|h| in_drift(&h.pose))
+            {
+                let turn = wrap_angle(best.pose.theta - estimate.theta).abs();
+                if turn > cfg.vote_heading_window(drift_path) {
+                    why = why.max(LoopRejection::ImplausibleTurn);
+                } else {
+                    start = Some((best.pose, true));
+                    // A distinct place anywhere in the reference that
+                    // scores near it (or better, outside the window)
+                    // leaves the answer in doubt.
+                    runner_up = result
+                        .hypotheses
+                        .iter()
+                        .filter(|h| {
+                            (h.pose.x - best.pose.x).hypot(h.pose.y - best.pose.y)
+                                > global.cluster_distance
+                                || wrap_angle(h.pose.theta - best.pose.theta).abs()
+                                    > global.cluster_angle
+                        })
+                        .map(|h| h.score / best.score.max(1e-9))
+                        .reduce(f64::max);
                 }
             }
         }
@@ -527,10 +629,31 @@ mod tests {
         })
     }
 
+    /// A loop edge between `from` and `to` (its measurement does not
+    /// matter to the paths).
+    fn tie(from: usize, to: usize) -> Edge {
+        Edge {
+            from,
+            to,
+            measurement: Pose2::IDENTITY,
+            information: Matrix3::identity(),
+            kind: EdgeKind::Loop,
+        }
+    }
+
     /// The room seen from five keyframes along 2 m, then 150 m of path
     /// later from near the first, whose estimate is `turned` off in
     /// heading: the loop search's result, and the current true pose.
     fn revisit(turned: f64, cfg: &LoopClosureConfig) -> (Result<LoopMatch, LoopRejection>, Pose2) {
+        revisit_tied(turned, cfg, &[])
+    }
+
+    /// [`revisit`] with loop edges the poses agree with in the graph.
+    fn revisit_tied(
+        turned: f64,
+        cfg: &LoopClosureConfig,
+        ties: &[Edge],
+    ) -> (Result<LoopMatch, LoopRejection>, Pose2) {
         let world = room();
         let mut keyframes = Vec::new();
         let mut poses = Vec::new();
@@ -542,10 +665,12 @@ mod tests {
         let truth = Pose2::new(5.4, 2.3, 0.3);
         keyframes.push(keyframe(&world, &truth, 150.0, 9));
         poses.push(Pose2::new(truth.x, truth.y, truth.theta + turned));
+        let paths = drift_paths(&keyframes, ties, &vec![1.0; ties.len()], 5);
         let query = LoopQuery {
             keyframes: &keyframes,
             poses: &poses,
             current: 5,
+            paths: &paths,
             allow_voting: true,
         };
         let found = close_loop(
@@ -581,6 +706,47 @@ mod tests {
         };
         let m = revisit(FRAC_PI_2, &wide).0.unwrap();
         assert!(m.by_voting);
+        assert!(
+            (m.pose.x - truth.x).hypot(m.pose.y - truth.y) < 0.05,
+            "{m:?}"
+        );
+    }
+
+    #[test]
+    fn loops_the_poses_agree_with_shorten_the_drift_paths() {
+        let world = room();
+        let keyframes: Vec<_> = (0..11)
+            .map(|i| keyframe(&world, &Pose2::new(5.0, 2.5, 0.0), i as f64, i))
+            .collect();
+        let chain = drift_paths(&keyframes, &[], &[], 10);
+        assert_eq!(chain, (0..11).rev().map(f64::from).collect::<Vec<_>>());
+        // A loop from keyframe 8 back to 2: 1 is 2 + 1 m away, 5 stays 5.
+        let tied = drift_paths(&keyframes, &[tie(8, 2)], &[1.0], 10);
+        assert_eq!((tied[1], tied[0], tied[5], tied[9]), (3.0, 4.0, 5.0, 1.0));
+        // One the poses disagree with (down-weighted) ties nothing.
+        assert_eq!(drift_paths(&keyframes, &[tie(8, 2)], &[0.2], 10), chain);
+        // Out-of-range keyframes are ignored, not a panic.
+        assert_eq!(drift_paths(&keyframes, &[tie(8, 40)], &[1.0], 10), chain);
+        assert!(
+            drift_paths(&keyframes, &[], &[], 11)
+                .iter()
+                .all(|p| p.is_infinite())
+        );
+    }
+
+    /// Voting finds the place 150 m of path later with the estimate 0.7
+    /// rad off (the test above); had a loop tied the current keyframe to
+    /// the place a few metres back, that much heading error is no drift,
+    /// and the answer is refused.
+    #[test]
+    fn voting_is_held_to_the_drift_since_the_last_loop() {
+        let cfg = LoopClosureConfig::default();
+        assert!(revisit(0.7, &cfg).0.unwrap().by_voting);
+        let (found, _) = revisit_tied(0.7, &cfg, &[tie(4, 5)]);
+        assert!(found.is_err(), "{found:?}");
+        // Within the tied window, the view is still found.
+        let (found, truth) = revisit_tied(0.15, &cfg, &[tie(4, 5)]);
+        let m = found.unwrap();
         assert!(
             (m.pose.x - truth.x).hypot(m.pose.y - truth.y) < 0.05,
             "{m:?}"

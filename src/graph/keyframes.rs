@@ -11,7 +11,7 @@ use tracing::{debug, trace_span};
 
 use super::{
     GraphError, LoopClosureConfig, LoopMatch, LoopQuery, LoopRejection, OptimizeReport, PoseGraph,
-    close_loop,
+    close_loop, drift_paths,
 };
 use crate::geometry::Pose2;
 use crate::localize::LocalizerConfig;
@@ -101,6 +101,7 @@ pub struct LoopSearchJob {
     keyframes: Vec<Arc<Keyframe>>,
     poses: Vec<Pose2>,
     current: usize,
+    paths: Vec<f64>,
     allow_voting: bool,
     fusion: SegmentMapConfig,
     localizer: LocalizerConfig,
@@ -133,6 +134,7 @@ impl LoopSearchJob {
             keyframes: &self.keyframes,
             poses: &self.poses,
             current: self.current,
+            paths: &self.paths,
             allow_voting: self.allow_voting,
         };
         let searched = Self::search(
@@ -500,10 +502,12 @@ impl KeyframeGraph {
         let Some(current) = self.searchable_newest(cfg) else {
             return Ok(None);
         };
+        let paths = self.drift_paths(current, cfg);
         let query = LoopQuery {
             keyframes: &self.keyframes,
             poses: self.graph.poses(),
             current,
+            paths: &paths,
             allow_voting: self.voting_now(cfg),
         };
         let searched = LoopSearchJob::search(&query, fusion, localizer, global, cfg);
@@ -514,6 +518,13 @@ impl KeyframeGraph {
     fn searchable_newest(&self, cfg: &LoopClosureConfig) -> Option<usize> {
         let current = self.keyframes.len().checked_sub(1)?;
         (cfg.enabled && current > 0).then_some(current)
+    }
+
+    /// Path from each keyframe to `current` through the graph, with the
+    /// loops the poses agree with now (see [`drift_paths`]).
+    pub fn drift_paths(&self, current: usize, cfg: &LoopClosureConfig) -> Vec<f64> {
+        let weights = self.graph.edge_weights(&cfg.optimizer);
+        drift_paths(&self.keyframes, self.graph.edges(), &weights, current)
     }
 
     /// Whether the voting search may run for the newest keyframe.
@@ -557,6 +568,7 @@ impl KeyframeGraph {
             keyframes: self.keyframes.clone(),
             poses: self.graph.poses().to_vec(),
             current,
+            paths: self.drift_paths(current, cfg),
             allow_voting: self.voting_now(cfg),
             fusion: *fusion,
             localizer: *localizer,

@@ -25,7 +25,8 @@ mod closure;
 mod keyframes;
 
 pub use closure::{
-    LoopClosureConfig, LoopMatch, LoopQuery, LoopRejection, close_loop, loop_candidates,
+    LoopCandidate, LoopClosureConfig, LoopMatch, LoopQuery, LoopRejection, close_loop, drift_paths,
+    loop_candidates,
 };
 pub use keyframes::{
     AppliedOptimisation, Correction, KeyframeGraph, LoopSearchJob, LoopSearchResult, LoopStats,
