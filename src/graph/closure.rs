@@ -4,10 +4,6 @@
 //!    behind, whose pose lies within the drift the path since them allows
 //!    (`search_margin + drift_per_metre × path`, capped). The pose estimate
 //!    is not trusted beyond that radius, and nothing inside it is ruled out.
-//!    The path is the shortest through the graph ([`drift_paths`]): a loop
-//!    the poses agree with ties its two ends, so the drift since a place
-//!    is the drift since the nearest loop back to it, not since the robot
-//!    was first there.
 //! 2. **Reference**: the walls seen from the candidate and its neighbours
 //!    in the chain, fused into a small segment map (their own poses, which
 //!    agree with each other), never the recent chain's walls, which the
@@ -16,15 +12,19 @@
 //!    gates opened to the search radius (the common case after a first
 //!    closure: little drift left); when that finds nothing, the paper's
 //!    global localization (translation-segment voting) over the reference,
-//!    keeping only hypotheses inside the search region, so a loop is found
-//!    even when the drift exceeds every local gate; but not one turned
-//!    farther from the estimate than the heading can have drifted, which
-//!    in a rectilinear building is a quarter-turn alias.
+//!    so a loop is found even when the drift exceeds every local gate. Its
+//!    answer must lie within the drift since the two places were last tied:
+//!    the path for that window is the shortest through the graph
+//!    ([`drift_paths`]), where a loop the poses agree with joins its ends;
+//!    and it may not be turned farther from the estimate than the heading
+//!    can have drifted, which in a rectilinear building is a quarter-turn
+//!    alias.
 //! 4. **Verification**: a final local localization from the match, then
 //!    enough matched wall length, a constrained pose (no corridor
-//!    direction left free), no distinct runner-up among the voting's
-//!    hypotheses, and no wall of either view standing inside the other's
-//!    free space (the CLS regions).
+//!    direction left free), no distinct place among the voting's
+//!    hypotheses, inside the window or out, scoring near the answer, and
+//!    no wall of either view standing inside the other's free space (the
+//!    CLS regions).
 //!
 //! Only a verified match becomes a graph edge.
 
