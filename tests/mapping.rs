@@ -265,6 +265,40 @@ fn csail_at_one_degree_thinned_takes_no_quarter_turn_loop() {
     }
 }
 
+/// CSAIL at 1°, thinned to 0.7 m / 0.5 rad: 200 m after a loop had tied
+/// two sides of the building, voting placed a keyframe in a parallel
+/// corridor 8 m off (3.83 m mean error), while the search window still
+/// grew with the whole path driven since the candidate, not with the path
+/// since the loop.
+#[test]
+fn csail_at_one_degree_thinned_takes_no_loop_beyond_the_drift_since_the_last() {
+    let Some(dir) = csail_dir() else { return };
+    let (records, relations) = csail_head(&dir, usize::MAX);
+    let records = thinned(at_one_degree(records), 0.7, 0.5);
+    let e = map_and_score(&records, &relations, MapperConfig::default());
+    show("1°, thinned to 0.7 m / 0.5 rad", &e);
+    assert!(e.used >= 15, "{e:?}");
+    assert!(e.translation_m.mean < 0.2, "{e:?}");
+}
+
+/// CSAIL thinned to 1.5 m / 0.4 rad: after scans in a turn that matched
+/// nothing, the fixes that would have put the pose back 0.6–1 m were
+/// refused as jumps beyond the fixed 0.5 m (1.33 m mean error); the limit
+/// now widens with the prediction's position σ, to twice that at most.
+#[test]
+fn csail_thinned_to_one_and_a_half_metres_takes_the_fixes_its_spread_allows() {
+    let Some(dir) = csail_dir() else { return };
+    let (records, relations) = csail_head(&dir, usize::MAX);
+    let e = map_and_score(
+        &thinned(records, 1.5, 0.4),
+        &relations,
+        MapperConfig::default(),
+    );
+    show("thinned to 1.5 m / 0.4 rad", &e);
+    assert!(e.used >= 15, "{e:?}");
+    assert!(e.translation_m.mean < 0.15, "{e:?}");
+}
+
 /// Drives a simulated holonomic robot around the block of the loop world
 /// (36 m) with odometry that over-reads distance by 3 % and drifts 1° per
 /// metre; the mapper must stay far closer to the truth than the odometry,

@@ -59,8 +59,10 @@ pub struct LocalizerConfig {
     pub converged_translation: f64,
     /// Stop when a step turns less than this (rad). Default 1e-5.
     pub converged_rotation: f64,
-    /// Reject a solution farther than this from the prediction (m).
-    /// Default 0.5: odometry between two scans drifts far less.
+    /// Reject a solution farther than this from the prediction (m), or
+    /// than `gate_sigmas` of the prediction's largest position σ when that
+    /// is wider (after scans localization could not place), up to twice
+    /// this. Default 0.5: odometry between two scans drifts far less.
     pub max_translation_jump: f64,
     /// Reject a solution turned more than this from the prediction (rad),
     /// or than `gate_sigmas` of the prediction's own heading σ when that is
@@ -268,6 +270,18 @@ pub(crate) fn rotation_limit(prior: &[[f64; 3]; 3], cfg: &LocalizerConfig) -> f6
         .max(cfg.max_rotation_jump)
 }
 
+/// Largest translation correction (m) accepted for a prediction with
+/// covariance `prior`: as [`rotation_limit`], `max_translation_jump` or
+/// `gate_sigmas` of the prediction's largest position σ, at most twice
+/// `max_translation_jump`.
+pub(crate) fn translation_limit(prior: &[[f64; 3]; 3], cfg: &LocalizerConfig) -> f64 {
+    let (a, b, c) = (prior[0][0], prior[0][1], prior[1][1]);
+    let largest = 0.5 * (a + c) + (0.25 * (a - c) * (a - c) + b * b).sqrt();
+    (cfg.gate_sigmas * largest.max(0.0).sqrt())
+        .min(2.0 * cfg.max_translation_jump)
+        .max(cfg.max_translation_jump)
+}
+
 /// Localizes the robot: `local_lines` in the robot frame, `map` in the map
 /// frame, `predicted` the odometry prediction with covariance `prior`
 /// (x, y, θ). See the module documentation for the method.
@@ -340,7 +354,7 @@ pub fn localize(
 
     let dx = (pose.x - predicted.x).hypot(pose.y - predicted.y);
     let dtheta = wrap_angle(pose.theta - predicted.theta).abs();
-    if dx > cfg.max_translation_jump || dtheta > rotation_limit(prior, cfg) {
+    if dx > translation_limit(prior, cfg) || dtheta > rotation_limit(prior, cfg) {
         return Err(LocalizeError::ImplausibleJump { dx, dtheta });
     }
     Ok(LocalizationResult {
@@ -426,6 +440,32 @@ mod tests {
             r.pose
         );
         assert!((r.covariance[0][0] - PRIOR[0][0]).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_wide_position_prior_widens_the_translation_limit_only_up_to_twice_the_jump() {
+        let cfg = LocalizerConfig::default();
+        assert_eq!(cfg.max_translation_jump, 0.5);
+        // σ 0.1 m: three σ is within the jump.
+        assert!((translation_limit(&PRIOR, &cfg) - 0.5).abs() < 1e-12);
+        // σ 0.3 m along y only (after scans localization could not place).
+        let wide = [[0.01, 0.0, 0.0], [0.0, 0.09, 0.0], [0.0, 0.0, 0.01]];
+        assert!((translation_limit(&wide, &cfg) - 0.9).abs() < 1e-12);
+        // σ 1 m: capped at twice the jump.
+        let lost = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.01]];
+        assert!((translation_limit(&lost, &cfg) - 1.0).abs() < 1e-12);
+        // 0.7 m off: beyond max_translation_jump, within the widened limit.
+        let truth = Pose2::new(0.0, 0.0, 0.0);
+        let (local, map) = room(&truth);
+        let r = localize(&local, &map, Pose2::new(0.0, 0.7, 0.0), &wide, &cfg).unwrap();
+        assert!(r.pose.x.hypot(r.pose.y) < 1e-4, "{:?}", r.pose);
+        // σ 0.2 m: the gates still reach the walls, the limit (0.6 m)
+        // refuses the fix.
+        let middling = [[0.01, 0.0, 0.0], [0.0, 0.04, 0.0], [0.0, 0.0, 0.01]];
+        match localize(&local, &map, Pose2::new(0.0, 0.7, 0.0), &middling, &cfg) {
+            Err(LocalizeError::ImplausibleJump { dx, .. }) => assert!((dx - 0.7).abs() < 1e-3),
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]
