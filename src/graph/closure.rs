@@ -283,27 +283,27 @@ pub struct LoopQuery<'a> {
 }
 
 /// Path (m) from each keyframe to keyframe `current`: along the chain (the
-/// distance travelled between neighbours), where the loop edges among
-/// `edges` with kernel `weights` of at least one half (the current poses
-/// agree with them) join their ends at no length. The estimate of a place
-/// drifts from the current one by what was driven since the two were last
-/// tied: on thinned CSAIL, windows grown by the whole path since a place
-/// let voting take a parallel corridor 8 m off for a loop 200 m later,
-/// though a loop 45 keyframes back had tied the two sides already.
+/// distance travelled between neighbours), where each of `ties` (pairs of
+/// keyframes a loop the current poses agree with joins) counts as no
+/// length. The estimate of a place drifts from the current one by what was
+/// driven since the two were last tied: on thinned CSAIL, windows grown by
+/// the whole path since a place let voting take a parallel corridor 8 m
+/// off for a loop 200 m later, though a loop 45 keyframes back had tied
+/// the two sides already.
 pub fn drift_paths(
     keyframes: &[std::sync::Arc<Keyframe>],
-    edges: &[Edge],
-    weights: &[f64],
+    ties: &[(usize, usize)],
     current: usize,
 ) -> Vec<f64> {
     let n = keyframes.len();
-    let mut ties: Vec<Vec<usize>> = vec![Vec::new(); n];
-    for (e, w) in edges.iter().zip(weights) {
-        if e.kind == EdgeKind::Loop && *w >= 0.5 && e.from < n && e.to < n {
-            ties[e.from].push(e.to);
-            ties[e.to].push(e.from);
-        }
-    }
+    let travelled: Vec<f64> = keyframes.iter().map(|k| k.travelled).collect();
+    // Both directions of each tie, sorted: a node's ties are one run.
+    let mut links: Vec<(usize, usize)> = ties
+        .iter()
+        .filter(|&&(a, b)| a < n && b < n)
+        .flat_map(|&(a, b)| [(a, b), (b, a)])
+        .collect();
+    links.sort_unstable();
     let mut path = vec![f64::INFINITY; n];
     let Some(start) = path.get_mut(current) else {
         return path;
@@ -320,10 +320,15 @@ pub fn drift_paths(
         }
         let chain = [i.checked_sub(1), (i + 1 < n).then_some(i + 1)];
         let steps = chain.into_iter().flatten().map(|j| {
-            let step = (keyframes[j].travelled - keyframes[i].travelled).abs();
+            let step = (travelled[j] - travelled[i]).abs();
             (j, if step.is_finite() { step } else { 0.0 })
         });
-        for (j, step) in steps.chain(ties[i].iter().map(|&j| (j, 0.0))) {
+        let first = links.partition_point(|&(a, _)| a < i);
+        let tied = links[first..]
+            .iter()
+            .take_while(|&&(a, _)| a == i)
+            .map(|&(_, j)| (j, 0.0));
+        for (j, step) in steps.chain(tied) {
             let dj = d + step;
             if dj < path[j] {
                 path[j] = dj;
@@ -629,18 +634,6 @@ mod tests {
         })
     }
 
-    /// A loop edge between `from` and `to` (its measurement does not
-    /// matter to the paths).
-    fn tie(from: usize, to: usize) -> Edge {
-        Edge {
-            from,
-            to,
-            measurement: Pose2::IDENTITY,
-            information: Matrix3::identity(),
-            kind: EdgeKind::Loop,
-        }
-    }
-
     /// The room seen from five keyframes along 2 m, then 150 m of path
     /// later from near the first, whose estimate is `turned` off in
     /// heading: the loop search's result, and the current true pose.
@@ -652,7 +645,7 @@ mod tests {
     fn revisit_tied(
         turned: f64,
         cfg: &LoopClosureConfig,
-        ties: &[Edge],
+        ties: &[(usize, usize)],
     ) -> (Result<LoopMatch, LoopRejection>, Pose2) {
         let world = room();
         let mut keyframes = Vec::new();
@@ -665,7 +658,7 @@ mod tests {
         let truth = Pose2::new(5.4, 2.3, 0.3);
         keyframes.push(keyframe(&world, &truth, 150.0, 9));
         poses.push(Pose2::new(truth.x, truth.y, truth.theta + turned));
-        let paths = drift_paths(&keyframes, ties, &vec![1.0; ties.len()], 5);
+        let paths = drift_paths(&keyframes, ties, 5);
         let query = LoopQuery {
             keyframes: &keyframes,
             poses: &poses,
@@ -718,17 +711,18 @@ mod tests {
         let keyframes: Vec<_> = (0..11)
             .map(|i| keyframe(&world, &Pose2::new(5.0, 2.5, 0.0), i as f64, i))
             .collect();
-        let chain = drift_paths(&keyframes, &[], &[], 10);
+        let chain = drift_paths(&keyframes, &[], 10);
         assert_eq!(chain, (0..11).rev().map(f64::from).collect::<Vec<_>>());
         // A loop from keyframe 8 back to 2: 1 is 2 + 1 m away, 5 stays 5.
-        let tied = drift_paths(&keyframes, &[tie(8, 2)], &[1.0], 10);
+        let tied = drift_paths(&keyframes, &[(8, 2)], 10);
         assert_eq!((tied[1], tied[0], tied[5], tied[9]), (3.0, 4.0, 5.0, 1.0));
-        // One the poses disagree with (down-weighted) ties nothing.
-        assert_eq!(drift_paths(&keyframes, &[tie(8, 2)], &[0.2], 10), chain);
+        // Two loops chain: 8 to 2 and 3 back to 0.
+        let twice = drift_paths(&keyframes, &[(8, 2), (0, 3)], 10);
+        assert_eq!((twice[0], twice[1]), (3.0, 3.0));
         // Out-of-range keyframes are ignored, not a panic.
-        assert_eq!(drift_paths(&keyframes, &[tie(8, 40)], &[1.0], 10), chain);
+        assert_eq!(drift_paths(&keyframes, &[(8, 40)], 10), chain);
         assert!(
-            drift_paths(&keyframes, &[], &[], 11)
+            drift_paths(&keyframes, &[], 11)
                 .iter()
                 .all(|p| p.is_infinite())
         );
@@ -742,10 +736,10 @@ mod tests {
     fn voting_is_held_to_the_drift_since_the_last_loop() {
         let cfg = LoopClosureConfig::default();
         assert!(revisit(0.7, &cfg).0.unwrap().by_voting);
-        let (found, _) = revisit_tied(0.7, &cfg, &[tie(4, 5)]);
+        let (found, _) = revisit_tied(0.7, &cfg, &[(4, 5)]);
         assert!(found.is_err(), "{found:?}");
         // Within the tied window, the view is still found.
-        let (found, truth) = revisit_tied(0.15, &cfg, &[tie(4, 5)]);
+        let (found, truth) = revisit_tied(0.15, &cfg, &[(4, 5)]);
         let m = found.unwrap();
         assert!(
             (m.pose.x - truth.x).hypot(m.pose.y - truth.y) < 0.05,

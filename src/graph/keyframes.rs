@@ -11,13 +11,13 @@ use tracing::{debug, trace_span};
 
 use super::{
     GraphError, LoopClosureConfig, LoopMatch, LoopQuery, LoopRejection, OptimizeReport, PoseGraph,
-    close_loop, drift_paths,
+    agreeing_loops, close_loop, drift_paths,
 };
 use crate::geometry::Pose2;
 use crate::localize::LocalizerConfig;
 use crate::localize::global::GlobalConfig;
 use crate::map::cls::{ClsMap, ClsMapConfig};
-use crate::map::{EdgeKind, Keyframe, SegmentMap, SegmentMapConfig};
+use crate::map::{Edge, EdgeKind, Keyframe, SegmentMap, SegmentMapConfig};
 
 /// Loop-closure counters of a run.
 #[derive(Debug, Clone, PartialEq, Default, Serialize)]
@@ -101,7 +101,9 @@ pub struct LoopSearchJob {
     keyframes: Vec<Arc<Keyframe>>,
     poses: Vec<Pose2>,
     current: usize,
-    paths: Vec<f64>,
+    /// The graph's loop edges, for the paths through it (worked out in
+    /// the job, off the real-time loop).
+    loops: Vec<Edge>,
     allow_voting: bool,
     fusion: SegmentMapConfig,
     localizer: LocalizerConfig,
@@ -130,11 +132,14 @@ pub struct LoopSearchResult {
 impl LoopSearchJob {
     /// Searches; runs anywhere, touches nothing but itself.
     pub fn run(self) -> LoopSearchResult {
+        let ties: Vec<(usize, usize)> =
+            agreeing_loops(&self.loops, &self.poses, &self.cfg.optimizer).collect();
+        let paths = drift_paths(&self.keyframes, &ties, self.current);
         let query = LoopQuery {
             keyframes: &self.keyframes,
             poses: &self.poses,
             current: self.current,
-            paths: &self.paths,
+            paths: &paths,
             allow_voting: self.allow_voting,
         };
         let searched = Self::search(
@@ -523,8 +528,9 @@ impl KeyframeGraph {
     /// Path from each keyframe to `current` through the graph, with the
     /// loops the poses agree with now (see [`drift_paths`]).
     pub fn drift_paths(&self, current: usize, cfg: &LoopClosureConfig) -> Vec<f64> {
-        let weights = self.graph.edge_weights(&cfg.optimizer);
-        drift_paths(&self.keyframes, self.graph.edges(), &weights, current)
+        let ties: Vec<(usize, usize)> =
+            agreeing_loops(self.graph.edges(), self.graph.poses(), &cfg.optimizer).collect();
+        drift_paths(&self.keyframes, &ties, current)
     }
 
     /// Whether the voting search may run for the newest keyframe.
@@ -568,7 +574,7 @@ impl KeyframeGraph {
             keyframes: self.keyframes.clone(),
             poses: self.graph.poses().to_vec(),
             current,
-            paths: self.drift_paths(current, cfg),
+            loops: self.graph.loop_edges().cloned().collect(),
             allow_voting: self.voting_now(cfg),
             fusion: *fusion,
             localizer: *localizer,

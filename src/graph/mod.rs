@@ -158,6 +158,28 @@ fn kernel(kind: EdgeKind, chi2: f64, phi: f64) -> (f64, f64) {
     (s * s, s * s * chi2 + phi * (1.0 - s) * (1.0 - s))
 }
 
+/// The keyframes joined by each loop edge among `edges` that `poses`
+/// agree with: kernel weight at least ½ (a loop the optimiser
+/// down-weighted, or one not optimised in yet that disagrees, ties
+/// nothing).
+pub fn agreeing_loops<'a>(
+    edges: &'a [Edge],
+    poses: &'a [Pose2],
+    cfg: &OptimizerConfig,
+) -> impl Iterator<Item = (usize, usize)> + 'a {
+    let phi = cfg.loop_kernel;
+    edges
+        .iter()
+        .filter(move |e| {
+            let (Some(a), Some(b)) = (poses.get(e.from), poses.get(e.to)) else {
+                return false;
+            };
+            let r = edge_error(e, a, b);
+            e.kind == EdgeKind::Loop && kernel(e.kind, r.dot(&(e.information * r)), phi).0 >= 0.5
+        })
+        .map(|e| (e.from, e.to))
+}
+
 impl PoseGraph {
     pub fn new() -> Self {
         PoseGraph::default()

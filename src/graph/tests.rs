@@ -169,6 +169,10 @@ fn a_false_loop_is_down_weighted_by_the_kernel() {
         "{:?}",
         weights.last()
     );
+    // The true loop ties its keyframes for the loop search; the false one
+    // does not.
+    let ties: Vec<_> = agreeing_loops(g.edges(), g.poses(), &OptimizerConfig::default()).collect();
+    assert_eq!(ties, [(0, last)]);
 }
 
 #[test]
