@@ -504,10 +504,10 @@ pub fn close_loop(
             // Voting searches the whole reference, where a rectilinear
             // building repeats itself: its answer is held to the drift
             // since the two places were last tied by a loop.
-            let (radius, heading) = cfg.search_window(drift_path);
+            let (drift_radius, drift_heading) = cfg.search_window(drift_path);
             let in_drift = |p: &Pose2| {
-                (p.x - estimate.x).hypot(p.y - estimate.y) <= radius
-                    && wrap_angle(p.theta - estimate.theta).abs() <= heading
+                (p.x - estimate.x).hypot(p.y - estimate.y) <= drift_radius
+                    && wrap_angle(p.theta - estimate.theta).abs() <= drift_heading
             };
             if let Ok(result) = global_localize(&current.lines, &voters, global)
                 && let Some(best) = result.hypotheses.iter().find(|h| in_drift(&h.pose))
@@ -729,7 +729,8 @@ mod tests {
     }
 
     /// Voting finds the place 150 m of path later with the estimate 0.7
-    /// rad off (the test above); had a loop tied the current keyframe to
+    /// rad off (as in `voting_turns_the_estimate_no_farther_than_the_heading_can_drift`);
+    /// had a loop tied the current keyframe to
     /// the place a few metres back, that much heading error is no drift,
     /// and the answer is refused.
     #[test]
