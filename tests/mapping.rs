@@ -10,9 +10,9 @@
 use clsmap::eval::{Relation, RelationErrors, evaluate, read_relations};
 use clsmap::files::trajectory::read_tum;
 use clsmap::geometry::Pose2;
-use clsmap::input::{ScanRecord, open_log};
+use clsmap::input::{DeclaredMount, ScanRecord, open_log};
 use clsmap::pipeline::config::MapperConfig;
-use clsmap::pipeline::{MapRunOptions, Mapper, Progress, run_offline_mapping};
+use clsmap::pipeline::{MapRunOptions, Mapper, Progress, run_offline_mapping, take_declared_mount};
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
 use std::path::PathBuf;
 
@@ -389,6 +389,96 @@ fn simulated_loop_with_biased_odometry() {
     );
     // Walls are not duplicated much: the world has 8 walls.
     assert!(mapper.map().len() < 40, "{} segments", mapper.map().len());
+}
+
+/// A CARMEN log of ROBOTLASER1 lines, which give the laser's pose beside
+/// the robot's: the loop world driven once with the laser 0.25 m ahead of
+/// the robot's centre, the odometry 1 % long. Mapped with the mounting the
+/// log declares (as `clsmap map` does when the configuration leaves
+/// `laser_mount` out), the robot's poses come out right; mapped as if the
+/// laser sat at the centre, every turn on the spot swings the scans by the
+/// offset.
+#[test]
+fn a_robotlaser_log_is_mapped_with_the_laser_mount_it_declares() {
+    let world = World::loop_around_block();
+    let spec = ScanSpec::lms200_half_degree(0.01);
+    let mut rng = Rng::new(11);
+    let corners: [[f64; 2]; 5] = [[1.0, 1.0], [11.0, 1.0], [11.0, 9.0], [1.0, 9.0], [1.0, 1.0]];
+    let truth = tour(&corners, 1, 0.1);
+    let odo = drifting_odometry(&truth, 1.01, 0.0, &mut rng);
+    let mount = Pose2::new(0.25, 0.0, 0.0);
+    let out = std::env::temp_dir().join(format!("clsmap-robotlaser-{}", std::process::id()));
+    std::fs::create_dir_all(&out).unwrap();
+    let input = out.join("robotlaser.clf");
+    let time = |k: usize| 100.0 + 0.2 * k as f64;
+    let mut text = String::new();
+    for (k, (t, o)) in truth.iter().zip(&odo).enumerate() {
+        let scan = cast_scan(&world, &t.compose(&mount), &spec, time(k), &mut rng);
+        let ranges: Vec<String> = scan
+            .ranges
+            .iter()
+            .map(|r| format!("{:.3}", r.unwrap_or(spec.max_range)))
+            .collect();
+        let laser = o.compose(&mount);
+        text += &format!(
+            "ROBOTLASER1 0 {} {} {} {} 0.01 0 {} {} 0 {} {} {} {} {} {} 0 0 0 0 0 {} host {}\n",
+            spec.angle_min,
+            spec.angle_increment * (spec.beams - 1) as f64,
+            spec.angle_increment,
+            spec.max_range,
+            ranges.len(),
+            ranges.join(" "),
+            laser.x,
+            laser.y,
+            laser.theta,
+            o.x,
+            o.y,
+            o.theta,
+            time(k),
+            time(k),
+        );
+    }
+    std::fs::write(&input, text).unwrap();
+
+    let mut config = MapperConfig::default();
+    let declared = take_declared_mount(&mut config, &input).unwrap();
+    let DeclaredMount::Fixed(read) = declared else {
+        panic!("{declared:?}");
+    };
+    assert!((read.x - 0.25).abs() < 1e-5 && read.y.abs() < 1e-5 && read.theta.abs() < 1e-5);
+    let relations: Vec<Relation> = (1..truth.len())
+        .map(|k| Relation {
+            t1: time(k - 1),
+            t2: time(k),
+            delta: truth[k - 1].between(&truth[k]),
+        })
+        .chain((0..truth.len()).step_by(10).map(|k| Relation {
+            t1: time(0),
+            t2: time(k),
+            delta: truth[0].between(&truth[k]),
+        }))
+        .collect();
+    let score = |config: &MapperConfig, name: &str| {
+        let dir = out.join(name);
+        run_offline_mapping(&input, &dir, config, &MapRunOptions::default(), &mut |_| {}).unwrap();
+        let tum = read_tum(std::io::BufReader::new(
+            std::fs::File::open(dir.join("trajectory.tum")).unwrap(),
+        ))
+        .unwrap();
+        let e = evaluate(&tum, &relations);
+        show(name, &e);
+        assert_eq!(e.used, relations.len());
+        e
+    };
+    let declared = score(&config, "declared mount");
+    let centred = score(&MapperConfig::default(), "laser taken as centred");
+    assert!(declared.translation_m.mean < 0.01, "{declared:?}");
+    assert!(declared.translation_m.max < 0.05, "{declared:?}");
+    assert!(
+        centred.translation_m.mean > 3.0 * declared.translation_m.mean,
+        "{centred:?} against {declared:?}"
+    );
+    std::fs::remove_dir_all(&out).unwrap();
 }
 
 /// The library entry point writes a readable trajectory (one pose per scan,

@@ -48,7 +48,7 @@ pub fn localize(
     track: bool,
     max_hypotheses: usize,
 ) -> anyhow::Result<ExitCode> {
-    let mapper = super::mapping::mapper_config(config)?;
+    let mapper = super::mapping::mapper_config(config, input)?;
     let loaded = clsmap::map::file::load_with(map, checksum)
         .with_context(|| format!("cannot load the map {}", map.display()))?;
     // The walls local localization matched against when the map was made

@@ -6,10 +6,12 @@ use std::process::ExitCode;
 use anyhow::Context as _;
 use clsmap::eval::RelationErrors;
 use clsmap::files::trajectory::read_tum;
+use clsmap::input::DeclaredMount;
 use clsmap::map::cls::{self, GridConfig};
 use clsmap::pipeline::config::MapperConfig;
 use clsmap::pipeline::{self, Progress};
 use indicatif::{ProgressBar, ProgressStyle};
+use tracing::warn;
 
 /// Exit status of `map` when some input was skipped or the input broke
 /// off: the map was written, from less than was asked for.
@@ -22,7 +24,7 @@ pub fn map(
     relations: Option<&Path>,
     run: &pipeline::MapRunOptions<'_>,
 ) -> anyhow::Result<ExitCode> {
-    let config = mapper_config(config)?;
+    let config = mapper_config(config, input)?;
     if let Some((map, _)) = run.start_from {
         let written = out.join(pipeline::MAP_FILE);
         if let (Ok(a), Ok(b)) = (map.canonicalize(), written.canonicalize())
@@ -234,13 +236,44 @@ pub fn render(
     Ok(ExitCode::SUCCESS)
 }
 
-/// The mapper configuration from `path` (TOML), or the defaults.
-pub fn mapper_config(path: Option<&Path>) -> anyhow::Result<MapperConfig> {
-    let Some(path) = path else {
-        return Ok(MapperConfig::default());
+/// The mapper configuration from `path` (TOML), or the defaults; where it
+/// leaves `laser_mount` out, the laser's mounting as the log `input`
+/// declares it (see [`pipeline::take_declared_mount`]).
+pub fn mapper_config(path: Option<&Path>, input: &Path) -> anyhow::Result<MapperConfig> {
+    let (mut config, sets_mount) = match path {
+        None => (MapperConfig::default(), false),
+        Some(path) => {
+            let text = clsmap::files::durable::read_bounded(
+                path,
+                clsmap::files::durable::MAX_CONFIG_BYTES,
+            )
+            .with_context(|| format!("cannot read the configuration {}", path.display()))?;
+            let config = MapperConfig::from_toml(&text)
+                .with_context(|| format!("invalid configuration {}", path.display()))?;
+            let sets_mount = text
+                .parse::<toml::Table>()
+                .is_ok_and(|t| t.contains_key("laser_mount"));
+            (config, sets_mount)
+        }
     };
-    let text = clsmap::files::durable::read_bounded(path, clsmap::files::durable::MAX_CONFIG_BYTES)
-        .with_context(|| format!("cannot read the configuration {}", path.display()))?;
-    MapperConfig::from_toml(&text)
-        .with_context(|| format!("invalid configuration {}", path.display()))
+    if !sets_mount {
+        let declared = pipeline::take_declared_mount(&mut config, input)
+            .with_context(|| format!("cannot read {}", input.display()))?;
+        match declared {
+            DeclaredMount::Fixed(m) => println!(
+                "laser mounted at x {:.3} m, y {:.3} m, θ {:.4} rad on the robot, as {} declares",
+                m.x,
+                m.y,
+                m.theta,
+                input.display()
+            ),
+            DeclaredMount::Varying => warn!(
+                "{} gives laser poses that do not keep one place on the robot; \
+                 mapping with the laser at the robot's centre (set laser_mount to say where it is)",
+                input.display()
+            ),
+            DeclaredMount::None => {}
+        }
+    }
+    Ok(config)
 }

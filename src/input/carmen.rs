@@ -69,10 +69,12 @@ pub enum MalformedLine {
 /// One useful line of a CARMEN log.
 #[derive(Debug, Clone, PartialEq)]
 pub enum CarmenEntry {
-    /// A laser scan, with the odometry pose the line itself carries (if any).
+    /// A laser scan, with the odometry pose the line itself carries (if
+    /// any) and the laser's pose on the robot where the line declares it.
     Laser {
         scan: RangeScan,
         odometry: Option<Pose2>,
+        mount: Option<Pose2>,
     },
     /// A standalone odometry sample.
     Odometry { t: f64, pose: Pose2 },
@@ -224,6 +226,7 @@ pub fn parse_line(line: &str) -> Result<Option<CarmenEntry>, MalformedLine> {
                     ranges,
                 },
                 odometry: Some(odom),
+                mount: None,
             }
         }
         _ => {
@@ -244,8 +247,8 @@ pub fn parse_line(line: &str) -> Result<Option<CarmenEntry>, MalformedLine> {
             for _ in 0..n_remissions {
                 f.number("remission")?;
             }
-            let odometry = if record == "ROBOTLASER1" {
-                f.pose("laser_pose_x", "laser_pose_y", "laser_pose_theta")?;
+            let (odometry, mount) = if record == "ROBOTLASER1" {
+                let laser = f.pose("laser_pose_x", "laser_pose_y", "laser_pose_theta")?;
                 let robot = f.pose("robot_pose_x", "robot_pose_y", "robot_pose_theta")?;
                 for field in [
                     "laser_tv",
@@ -256,9 +259,9 @@ pub fn parse_line(line: &str) -> Result<Option<CarmenEntry>, MalformedLine> {
                 ] {
                     f.number(field)?;
                 }
-                Some(robot)
+                (Some(robot), Some(robot.between(&laser)))
             } else {
-                None
+                (None, None)
             };
             let t = f.tail()?;
             CarmenEntry::Laser {
@@ -269,10 +272,65 @@ pub fn parse_line(line: &str) -> Result<Option<CarmenEntry>, MalformedLine> {
                     ranges,
                 },
                 odometry,
+                mount,
             }
         }
     };
     Ok(Some(entry))
+}
+
+/// Laser lines read for [`declared_laser_mount`].
+const MOUNT_LINES: usize = 100;
+/// How far (m, rad) the mounts those lines declare may differ and still be
+/// one mounting: a log writes its poses to 6 decimals.
+const MOUNT_TOLERANCE: f64 = 1e-3;
+
+/// How a log says its laser sits on the robot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum DeclaredMount {
+    /// Its lines give no laser pose apart from the robot's (FLASER,
+    /// RAWLASER, recordings, bags).
+    None,
+    /// The first [`MOUNT_LINES`] laser lines that give one all agree.
+    Fixed(Pose2),
+    /// They disagree (laser and robot poses in different frames, such as
+    /// a corrected laser pose beside raw odometry): no mounting to read.
+    Varying,
+}
+
+/// The laser's pose on the robot as the first laser lines of a CARMEN log
+/// declare it (ROBOTLASER1 carries the laser's pose beside the robot's).
+/// Lines that cannot be parsed are passed over here; the mapping names
+/// them.
+pub fn declared_laser_mount<R: BufRead>(mut reader: R) -> DeclaredMount {
+    let mut first: Option<Pose2> = None;
+    let mut seen = 0;
+    let mut buf = Vec::new();
+    while seen < MOUNT_LINES {
+        buf.clear();
+        if !matches!(reader.read_until(b'\n', &mut buf), Ok(n) if n > 0) {
+            break;
+        }
+        let Ok(Ok(Some(CarmenEntry::Laser { mount, .. }))) =
+            std::str::from_utf8(&buf).map(parse_line)
+        else {
+            continue;
+        };
+        seen += 1;
+        match (mount, first) {
+            (Some(m), None) => first = Some(m),
+            (Some(m), Some(f)) => {
+                let far = (m.x - f.x).abs().max((m.y - f.y).abs());
+                if far > MOUNT_TOLERANCE
+                    || crate::geometry::wrap_angle(m.theta - f.theta).abs() > MOUNT_TOLERANCE
+                {
+                    return DeclaredMount::Varying;
+                }
+            }
+            (None, _) => {}
+        }
+    }
+    first.map_or(DeclaredMount::None, DeclaredMount::Fixed)
 }
 
 /// Streams the scans of a CARMEN log with the odometry pose at each scan.
@@ -326,7 +384,7 @@ impl<R: BufRead> CarmenScans<R> {
             kind: MalformedLine::NotUtf8,
         })?;
         match parse_line(text).map_err(|kind| InputError::Malformed { line, kind })? {
-            Some(CarmenEntry::Laser { scan, odometry }) => {
+            Some(CarmenEntry::Laser { scan, odometry, .. }) => {
                 if let Some(previous) = self.last_scan_t.filter(|&p| scan.t <= p) {
                     return Err(InputError::ScanOutOfOrder {
                         at: format!("line {line}"),
@@ -398,7 +456,7 @@ mod tests {
             (576.5, 0.1, -2.2),
             1134864629.895182,
         );
-        let Some(CarmenEntry::Laser { scan, odometry }) = parse_line(&line).unwrap() else {
+        let Some(CarmenEntry::Laser { scan, odometry, .. }) = parse_line(&line).unwrap() else {
             panic!("not a laser entry");
         };
         assert_eq!(scan.t, 1134864629.895182);
@@ -426,7 +484,12 @@ mod tests {
     fn rawlaser_carries_its_own_geometry() {
         let line = "RAWLASER1 0 -1.5 3.0 0.0175 8.0 0.01 0 3 1.0 8.0 2.0 \
                     2 100 200 12.5 host 12.6";
-        let Some(CarmenEntry::Laser { scan, odometry }) = parse_line(line).unwrap() else {
+        let Some(CarmenEntry::Laser {
+            scan,
+            odometry,
+            mount,
+        }) = parse_line(line).unwrap()
+        else {
             panic!("not a laser entry");
         };
         assert_eq!(scan.angle_min, -1.5);
@@ -437,18 +500,66 @@ mod tests {
         );
         assert_eq!(scan.t, 12.5);
         assert_eq!(odometry, None);
+        assert_eq!(mount, None);
     }
 
     #[test]
     fn robotlaser_uses_the_robot_pose_as_odometry() {
         let line = "ROBOTLASER1 0 -1.5708 3.1416 0.5 81.9 0.01 0 2 1.5 2.5 0 \
                     1.1 2.1 0.3 1.0 2.0 0.3 0.2 0.0 0.5 0.2 0.0 7.25 host 7.3";
-        let Some(CarmenEntry::Laser { scan, odometry }) = parse_line(line).unwrap() else {
+        let Some(CarmenEntry::Laser {
+            scan,
+            odometry,
+            mount,
+        }) = parse_line(line).unwrap()
+        else {
             panic!("not a laser entry");
         };
         assert_eq!(scan.ranges, vec![Ok(1.5), Ok(2.5)]);
         assert_eq!(odometry, Some(Pose2::new(1.0, 2.0, 0.3)));
         assert_eq!(scan.t, 7.25);
+        // The laser 0.1 m on in x and y of the map, the robot turned 0.3
+        // rad: on the robot it sits (0.1 cos 0.3 + 0.1 sin 0.3, ...).
+        let mount = mount.unwrap();
+        let (c, s) = (0.3f64.cos(), 0.3f64.sin());
+        assert!((mount.x - 0.1 * (c + s)).abs() < 1e-12, "{mount:?}");
+        assert!((mount.y - 0.1 * (c - s)).abs() < 1e-12, "{mount:?}");
+        assert!(mount.theta.abs() < 1e-12);
+    }
+
+    /// A ROBOTLASER1 line with the robot at `robot` and the laser at
+    /// `laser` (x, y, θ), two beams.
+    fn robotlaser(robot: (f64, f64, f64), laser: (f64, f64, f64), t: f64) -> String {
+        format!(
+            "ROBOTLASER1 0 -1.5708 3.1416 0.5 81.9 0.01 0 2 1.5 2.5 0 \
+             {} {} {} {} {} {} 0.2 0.0 0.5 0.2 0.0 {t} host {t}\n",
+            laser.0, laser.1, laser.2, robot.0, robot.1, robot.2
+        )
+    }
+
+    #[test]
+    fn the_laser_mount_is_read_where_the_lines_agree_on_it() {
+        // The laser 0.2 m ahead of the robot, which turns and drives.
+        let mut text = String::from("# a comment\nROBOTLASER1 broken\n");
+        for k in 0..5 {
+            let (x, y, th) = (0.3 * k as f64, 0.1, 0.4 * k as f64);
+            let laser = (x + 0.2 * th.cos(), y + 0.2 * th.sin(), th);
+            text += &robotlaser((x, y, th), laser, k as f64);
+        }
+        let DeclaredMount::Fixed(m) = declared_laser_mount(text.as_bytes()) else {
+            panic!("no mount read");
+        };
+        assert!((m.x - 0.2).abs() < 1e-9 && m.y.abs() < 1e-9 && m.theta.abs() < 1e-9);
+        // A laser pose that wanders on the robot (a corrected pose beside
+        // raw odometry) is no mounting.
+        text += &robotlaser((2.0, 0.1, 0.0), (2.3, 0.1, 0.0), 9.0);
+        assert_eq!(
+            declared_laser_mount(text.as_bytes()),
+            DeclaredMount::Varying
+        );
+        // FLASER declares none.
+        let flaser = flaser(&["1.0", "2.0"], (1.0, 2.0, 0.3), 5.0);
+        assert_eq!(declared_laser_mount(flaser.as_bytes()), DeclaredMount::None);
     }
 
     #[test]

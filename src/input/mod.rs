@@ -18,7 +18,7 @@ pub mod lms200;
 pub mod odometry;
 
 pub use bag::{BagOdometry, BagScans, BagTopics};
-pub use carmen::{CarmenEntry, CarmenScans, MalformedLine, NO_RETURN_RANGE};
+pub use carmen::{CarmenEntry, CarmenScans, DeclaredMount, MalformedLine, NO_RETURN_RANGE};
 pub use odometry::{OdometryError, OdometryTrack};
 
 use crate::geometry::{Pose2, RangeScan};
@@ -174,22 +174,11 @@ impl LogFile {
             path: path.to_owned(),
             source,
         };
-        let is_sqlite_bag = path.extension().is_some_and(|e| e == "db3");
-        if path.is_dir() || is_sqlite_bag {
+        let Some((kind, file)) = log_kind(path)? else {
             return Self::open_bag(path, options);
-        }
-        let mut file = File::open(path).map_err(open_error)?;
+        };
         let size = file.metadata().map_err(open_error)?.len();
-        // A recording and a bag start with their signatures; anything else
-        // is read as a CARMEN text log, which names the first line it
-        // cannot parse.
-        let mut head = [0u8; 8];
-        let head_read = file.read_exact(&mut head).is_ok();
-        if head_read && &head == b"\x89MCAP0\r\n" {
-            return Self::open_bag(path, options);
-        }
-        let is_recording = head_read && head[..7] == ::lms200::recording::MAGIC[..7];
-        file.seek(SeekFrom::Start(0)).map_err(open_error)?;
+        let is_recording = kind == LogKind::Recording;
         let bytes_read = Rc::new(Cell::new(0));
         let reader = BufReader::new(CountingReader {
             inner: file,
@@ -240,6 +229,50 @@ impl Iterator for LogFile {
     fn next(&mut self) -> Option<Self::Item> {
         self.scans.next()
     }
+}
+
+/// A log file that is not a bag.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum LogKind {
+    Recording,
+    Carmen,
+}
+
+/// What the log at `path` is, with its file opened at the start; `None`
+/// for a bag (a directory, an SQLite `.db3`, or an MCAP file). A recording
+/// and a bag start with their signatures; anything else is read as a
+/// CARMEN text log, which names the first line it cannot parse.
+fn log_kind(path: &Path) -> Result<Option<(LogKind, File)>, InputError> {
+    let open_error = |source| InputError::Open {
+        path: path.to_owned(),
+        source,
+    };
+    if path.is_dir() || path.extension().is_some_and(|e| e == "db3") {
+        return Ok(None);
+    }
+    let mut file = File::open(path).map_err(open_error)?;
+    let mut head = [0u8; 8];
+    let head_read = file.read_exact(&mut head).is_ok();
+    if head_read && &head == b"\x89MCAP0\r\n" {
+        return Ok(None);
+    }
+    let kind = if head_read && head[..7] == ::lms200::recording::MAGIC[..7] {
+        LogKind::Recording
+    } else {
+        LogKind::Carmen
+    };
+    file.seek(SeekFrom::Start(0)).map_err(open_error)?;
+    Ok(Some((kind, file)))
+}
+
+/// How the log at `path` says its laser sits on the robot (see
+/// [`carmen::declared_laser_mount`]); recordings and bags declare nothing
+/// here.
+pub fn declared_laser_mount(path: &Path) -> Result<DeclaredMount, InputError> {
+    Ok(match log_kind(path)? {
+        Some((LogKind::Carmen, file)) => carmen::declared_laser_mount(BufReader::new(file)),
+        _ => DeclaredMount::None,
+    })
 }
 
 /// Opens a log file for streaming; see [`LogFile::open`].

@@ -173,8 +173,10 @@ fn mount_fields<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Pose2, D::Erro
 #[serde(deny_unknown_fields, default)]
 pub struct MapperConfig {
     /// Laser pose in the robot frame (m, rad). Default: the identity, as in
-    /// the CSAIL log whose laser pose equals its odometry pose. Each of
-    /// `x`, `y`, `theta` may be left out (0).
+    /// the CSAIL log whose laser pose equals its odometry pose; a
+    /// configuration that leaves it out maps a log that declares its
+    /// laser's pose with that pose ([`super::take_declared_mount`]). Each
+    /// of `x`, `y`, `theta` may be left out (0).
     #[serde(deserialize_with = "mount_fields")]
     pub laser_mount: Pose2,
     pub extraction: ExtractionConfig,
@@ -760,8 +762,10 @@ mod documented_defaults {
         for line in defaults.lines() {
             if let Some((key, _)) = line.split_once(" = ") {
                 assert!(
-                    text.lines()
-                        .any(|l| l.trim_start().starts_with(&format!("{key} ="))),
+                    text.lines().any(|l| l
+                        .trim_start()
+                        .trim_start_matches("# ")
+                        .starts_with(&format!("{key} ="))),
                     "config/mapper.toml does not document `{key}`"
                 );
             }

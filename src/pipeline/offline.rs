@@ -11,7 +11,7 @@ use super::summary::MappingSummary;
 use super::{Mapper, PipelineError};
 use crate::eval::{EvalError, RelationErrors, evaluate_relations as evaluate_against};
 use crate::files::trajectory::StampedPose;
-use crate::input::{LogOptions, open_log_with};
+use crate::input::{DeclaredMount, InputError, LogOptions, declared_laser_mount, open_log_with};
 use crate::map::file::ChecksumCheck;
 use crate::pipeline::config::MapperConfig;
 
@@ -129,6 +129,24 @@ pub fn run_offline_mapping(
     }
     write_outputs(out_dir, &mapper, draw_loops)?;
     Ok(summary)
+}
+
+/// Takes the laser's mounting on the robot from the log at `input` where
+/// it declares one (CARMEN ROBOTLASER1 lines give the laser's pose beside
+/// the robot's): for a configuration that leaves `laser_mount` out. Mapped
+/// as if it sat at the robot's centre, a laser 0.25 m ahead of it swings
+/// through every turn on the spot: in a simulated loop the relations came
+/// out 0.032 m off on average against 0.003 m (`tests/mapping.rs`).
+/// Returns what the log declared.
+pub fn take_declared_mount(
+    config: &mut MapperConfig,
+    input: &Path,
+) -> Result<DeclaredMount, InputError> {
+    let declared = declared_laser_mount(input)?;
+    if let DeclaredMount::Fixed(mount) = declared {
+        config.laser_mount = mount;
+    }
+    Ok(declared)
 }
 
 /// The relation metric of a trajectory against a relations file; see
