@@ -10,7 +10,7 @@
 use clsmap::eval::{Relation, RelationErrors, evaluate, read_relations};
 use clsmap::files::trajectory::read_tum;
 use clsmap::geometry::Pose2;
-use clsmap::input::{DeclaredMount, ScanRecord, open_log};
+use clsmap::input::{DeclaredMount, LogOptions, ScanRecord, open_log};
 use clsmap::pipeline::config::MapperConfig;
 use clsmap::pipeline::{MapRunOptions, Mapper, Progress, run_offline_mapping, take_declared_mount};
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
@@ -391,62 +391,31 @@ fn simulated_loop_with_biased_odometry() {
     assert!(mapper.map().len() < 40, "{} segments", mapper.map().len());
 }
 
-/// A CARMEN log of ROBOTLASER1 lines, which give the laser's pose beside
-/// the robot's: the loop world driven once with the laser 0.25 m ahead of
-/// the robot's centre, the odometry 1 % long. Mapped with the mounting the
-/// log declares (as `clsmap map` does when the configuration leaves
-/// `laser_mount` out), the robot's poses come out right; mapped as if the
-/// laser sat at the centre, every turn on the spot swings the scans by the
-/// offset.
-#[test]
-fn a_robotlaser_log_is_mapped_with_the_laser_mount_it_declares() {
+/// The loop world driven once with the laser at `mount` on the robot, the
+/// odometry 1 % long: the scans (laser frame), the odometry, and the
+/// relations between the true poses (consecutive, and from the start to
+/// every tenth), at 5 Hz from t = 100 s.
+struct MountedLoop {
+    scans: Vec<clsmap::geometry::RangeScan>,
+    odometry: Vec<Pose2>,
+    relations: Vec<Relation>,
+    spec: ScanSpec,
+}
+
+fn loop_with_laser_at(mount: Pose2) -> MountedLoop {
     let world = World::loop_around_block();
     let spec = ScanSpec::lms200_half_degree(0.01);
     let mut rng = Rng::new(11);
     let corners: [[f64; 2]; 5] = [[1.0, 1.0], [11.0, 1.0], [11.0, 9.0], [1.0, 9.0], [1.0, 1.0]];
     let truth = tour(&corners, 1, 0.1);
-    let odo = drifting_odometry(&truth, 1.01, 0.0, &mut rng);
-    let mount = Pose2::new(0.25, 0.0, 0.0);
-    let out = std::env::temp_dir().join(format!("clsmap-robotlaser-{}", std::process::id()));
-    std::fs::create_dir_all(&out).unwrap();
-    let input = out.join("robotlaser.clf");
+    let odometry = drifting_odometry(&truth, 1.01, 0.0, &mut rng);
     let time = |k: usize| 100.0 + 0.2 * k as f64;
-    let mut text = String::new();
-    for (k, (t, o)) in truth.iter().zip(&odo).enumerate() {
-        let scan = cast_scan(&world, &t.compose(&mount), &spec, time(k), &mut rng);
-        let ranges: Vec<String> = scan
-            .ranges
-            .iter()
-            .map(|r| format!("{:.3}", r.unwrap_or(spec.max_range)))
-            .collect();
-        let laser = o.compose(&mount);
-        text += &format!(
-            "ROBOTLASER1 0 {} {} {} {} 0.01 0 {} {} 0 {} {} {} {} {} {} 0 0 0 0 0 {} host {}\n",
-            spec.angle_min,
-            spec.angle_increment * (spec.beams - 1) as f64,
-            spec.angle_increment,
-            spec.max_range,
-            ranges.len(),
-            ranges.join(" "),
-            laser.x,
-            laser.y,
-            laser.theta,
-            o.x,
-            o.y,
-            o.theta,
-            time(k),
-            time(k),
-        );
-    }
-    std::fs::write(&input, text).unwrap();
-
-    let mut config = MapperConfig::default();
-    let declared = take_declared_mount(&mut config, &input).unwrap();
-    let DeclaredMount::Fixed(read) = declared else {
-        panic!("{declared:?}");
-    };
-    assert!((read.x - 0.25).abs() < 1e-5 && read.y.abs() < 1e-5 && read.theta.abs() < 1e-5);
-    let relations: Vec<Relation> = (1..truth.len())
+    let scans = truth
+        .iter()
+        .enumerate()
+        .map(|(k, t)| cast_scan(&world, &t.compose(&mount), &spec, time(k), &mut rng))
+        .collect();
+    let relations = (1..truth.len())
         .map(|k| Relation {
             t1: time(k - 1),
             t2: time(k),
@@ -458,16 +427,43 @@ fn a_robotlaser_log_is_mapped_with_the_laser_mount_it_declares() {
             delta: truth[0].between(&truth[k]),
         }))
         .collect();
+    MountedLoop {
+        scans,
+        odometry,
+        relations,
+        spec,
+    }
+}
+
+/// Maps `input` with the mounting it declares (as `clsmap map` does when
+/// the configuration leaves `laser_mount` out) and as if the laser sat at
+/// the robot's centre; checks the mounting read is `mount` and that only
+/// the mapping with it comes out right.
+fn map_with_and_without_the_declared_mount(
+    input: &std::path::Path,
+    lp: &MountedLoop,
+    mount: Pose2,
+) {
+    let mut config = MapperConfig::default();
+    let declared = take_declared_mount(&mut config, input, &LogOptions::default()).unwrap();
+    let DeclaredMount::Fixed(read) = declared else {
+        panic!("{declared:?}");
+    };
+    let off = read.between(&mount);
+    assert!(
+        off.x.hypot(off.y) < 1e-5 && off.theta.abs() < 1e-5,
+        "{read:?}"
+    );
     let score = |config: &MapperConfig, name: &str| {
-        let dir = out.join(name);
-        run_offline_mapping(&input, &dir, config, &MapRunOptions::default(), &mut |_| {}).unwrap();
+        let dir = input.with_extension(name.replace(' ', "_"));
+        run_offline_mapping(input, &dir, config, &MapRunOptions::default(), &mut |_| {}).unwrap();
         let tum = read_tum(std::io::BufReader::new(
             std::fs::File::open(dir.join("trajectory.tum")).unwrap(),
         ))
         .unwrap();
-        let e = evaluate(&tum, &relations);
+        let e = evaluate(&tum, &lp.relations);
         show(name, &e);
-        assert_eq!(e.used, relations.len());
+        assert_eq!(e.used, lp.relations.len());
         e
     };
     let declared = score(&config, "declared mount");
@@ -478,6 +474,119 @@ fn a_robotlaser_log_is_mapped_with_the_laser_mount_it_declares() {
         centred.translation_m.mean > 3.0 * declared.translation_m.mean,
         "{centred:?} against {declared:?}"
     );
+}
+
+/// A CARMEN log of ROBOTLASER1 lines, which give the laser's pose beside
+/// the robot's, with the laser 0.25 m ahead of the robot's centre: mapped
+/// as if the laser sat at the centre, every turn on the spot swings the
+/// scans by the offset.
+#[test]
+fn a_robotlaser_log_is_mapped_with_the_laser_mount_it_declares() {
+    let mount = Pose2::new(0.25, 0.0, 0.0);
+    let lp = loop_with_laser_at(mount);
+    let out = std::env::temp_dir().join(format!("clsmap-robotlaser-{}", std::process::id()));
+    std::fs::create_dir_all(&out).unwrap();
+    let input = out.join("robotlaser.clf");
+    let mut text = String::new();
+    for (scan, o) in lp.scans.iter().zip(&lp.odometry) {
+        let ranges: Vec<String> = scan
+            .ranges
+            .iter()
+            .map(|r| format!("{:.3}", r.unwrap_or(lp.spec.max_range)))
+            .collect();
+        let laser = o.compose(&mount);
+        text += &format!(
+            "ROBOTLASER1 0 {} {} {} {} 0.01 0 {} {} 0 {} {} {} {} {} {} 0 0 0 0 0 {} host {}\n",
+            lp.spec.angle_min,
+            lp.spec.angle_increment * (lp.spec.beams - 1) as f64,
+            lp.spec.angle_increment,
+            lp.spec.max_range,
+            ranges.len(),
+            ranges.join(" "),
+            laser.x,
+            laser.y,
+            laser.theta,
+            o.x,
+            o.y,
+            o.theta,
+            scan.t,
+            scan.t,
+        );
+    }
+    std::fs::write(&input, text).unwrap();
+    map_with_and_without_the_declared_mount(&input, &lp, mount);
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+/// A bag of the same drive with the laser behind the robot's centre and
+/// off to one side, turned a little: `/scan` in frame `laser`, `/odom` of
+/// `base_footprint`, and `/tf_static` linking the two through a frame
+/// between (`base_footprint` → `sensor_plate` → `laser`).
+#[test]
+fn a_bag_is_mapped_with_the_laser_mount_its_tf_static_gives() {
+    use clsmap::ros2::bag::{BagWriter, Durability};
+    use clsmap::ros2::msg::{PoseWithCovariance, TransformStamped};
+    use clsmap::ros2::{Header, LaserScan, Odometry, Quaternion, TfMessage, Time, Vector3};
+    let plate = Pose2::new(-0.1, 0.05, 0.0);
+    let on_plate = Pose2::new(-0.1, 0.0, 0.05);
+    let mount = plate.compose(&on_plate);
+    let lp = loop_with_laser_at(mount);
+    let out = std::env::temp_dir().join(format!("clsmap-bag-mount-{}", std::process::id()));
+    std::fs::create_dir_all(&out).unwrap();
+    let input = out.join("drive.mcap");
+    let mut bag = BagWriter::create(&input).unwrap();
+    let mut scans = bag
+        .topic::<LaserScan>("/scan", Durability::Volatile)
+        .unwrap();
+    let mut odom = bag
+        .topic::<Odometry>("/odom", Durability::Volatile)
+        .unwrap();
+    let mut statics = bag
+        .topic::<TfMessage>("/tf_static", Durability::TransientLocal)
+        .unwrap();
+    let header = |t: f64, frame: &str| Header {
+        stamp: Time::from_secs(t).unwrap(),
+        frame_id: frame.into(),
+    };
+    let link = |parent: &str, child: &str, p: Pose2| TransformStamped {
+        header: header(lp.scans[0].t, parent),
+        child_frame_id: child.into(),
+        translation: Vector3 {
+            x: p.x,
+            y: p.y,
+            z: 0.3,
+        },
+        rotation: Quaternion::from_yaw(p.theta),
+    };
+    let ns = |t: f64| (t * 1e9) as u64;
+    let tf = TfMessage {
+        transforms: vec![
+            link("base_footprint", "sensor_plate", plate),
+            link("sensor_plate", "laser", on_plate),
+        ],
+    };
+    bag.write(&mut statics, ns(lp.scans[0].t), &tf).unwrap();
+    for (scan, o) in lp.scans.iter().zip(&lp.odometry) {
+        let msg = Odometry {
+            header: header(scan.t, "odom"),
+            child_frame_id: "base_footprint".into(),
+            pose: PoseWithCovariance {
+                position: Vector3 {
+                    x: o.x,
+                    y: o.y,
+                    z: 0.0,
+                },
+                orientation: Quaternion::from_yaw(o.theta),
+                covariance: [0.0; 36],
+            },
+            ..Default::default()
+        };
+        bag.write(&mut odom, ns(scan.t), &msg).unwrap();
+        let laser = clsmap::input::bag::laser_scan(scan, "laser", lp.spec.max_range, 0.0, 0.2);
+        bag.write(&mut scans, ns(scan.t), &laser).unwrap();
+    }
+    bag.finish().unwrap();
+    map_with_and_without_the_declared_mount(&input, &lp, mount);
     std::fs::remove_dir_all(&out).unwrap();
 }
 

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use anyhow::Context as _;
 use clsmap::geometry::{Pose2, extract_lines};
-use clsmap::input::open_log;
+use clsmap::input::{LogOptions, open_log};
 use clsmap::localize::global::{
     GlobalConfig, GlobalError, GlobalMap, GlobalResult, disambiguate, global_localize,
 };
@@ -48,7 +48,7 @@ pub fn localize(
     track: bool,
     max_hypotheses: usize,
 ) -> anyhow::Result<ExitCode> {
-    let mapper = super::mapping::mapper_config(config, input)?;
+    let mapper = super::mapping::mapper_config(config, input, &LogOptions::default())?;
     let loaded = clsmap::map::file::load_with(map, checksum)
         .with_context(|| format!("cannot load the map {}", map.display()))?;
     // The walls local localization matched against when the map was made

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use anyhow::Context as _;
 use clsmap::eval::RelationErrors;
 use clsmap::files::trajectory::read_tum;
-use clsmap::input::DeclaredMount;
+use clsmap::input::{DeclaredMount, LogOptions};
 use clsmap::map::cls::{self, GridConfig};
 use clsmap::pipeline::config::MapperConfig;
 use clsmap::pipeline::{self, Progress};
@@ -24,7 +24,7 @@ pub fn map(
     relations: Option<&Path>,
     run: &pipeline::MapRunOptions<'_>,
 ) -> anyhow::Result<ExitCode> {
-    let config = mapper_config(config, input)?;
+    let config = mapper_config(config, input, run.log.unwrap_or(&LogOptions::default()))?;
     if let Some((map, _)) = run.start_from {
         let written = out.join(pipeline::MAP_FILE);
         if let (Ok(a), Ok(b)) = (map.canonicalize(), written.canonicalize())
@@ -238,8 +238,12 @@ pub fn render(
 
 /// The mapper configuration from `path` (TOML), or the defaults; where it
 /// leaves `laser_mount` out, the laser's mounting as the log `input`
-/// declares it (see [`pipeline::take_declared_mount`]).
-pub fn mapper_config(path: Option<&Path>, input: &Path) -> anyhow::Result<MapperConfig> {
+/// (read with `log`) declares it (see [`pipeline::take_declared_mount`]).
+pub fn mapper_config(
+    path: Option<&Path>,
+    input: &Path,
+    log: &LogOptions,
+) -> anyhow::Result<MapperConfig> {
     let (mut config, sets_mount) = match path {
         None => (MapperConfig::default(), false),
         Some(path) => {
@@ -257,7 +261,7 @@ pub fn mapper_config(path: Option<&Path>, input: &Path) -> anyhow::Result<Mapper
         }
     };
     if !sets_mount {
-        let declared = pipeline::take_declared_mount(&mut config, input)
+        let declared = pipeline::take_declared_mount(&mut config, input, log)
             .with_context(|| format!("cannot read {}", input.display()))?;
         match declared {
             DeclaredMount::Fixed(m) => println!(
@@ -268,8 +272,9 @@ pub fn mapper_config(path: Option<&Path>, input: &Path) -> anyhow::Result<Mapper
                 input.display()
             ),
             DeclaredMount::Varying => warn!(
-                "{} gives laser poses that do not keep one place on the robot; \
-                 mapping with the laser at the robot's centre (set laser_mount to say where it is)",
+                "{} gives no one planar pose of the laser on the robot (laser poses that \
+                 move on it, or a tilted laser); mapping with the laser at the robot's centre \
+                 (set laser_mount to say where it is)",
                 input.display()
             ),
             DeclaredMount::None => {}

@@ -18,10 +18,10 @@ use std::rc::Rc;
 
 use crate::geometry::{BeamFault, Pose2, RangeScan};
 use crate::ros2::bag::{BagMessage, BagReader, TopicInfo};
-use crate::ros2::{LaserScan, Odometry, RosMessage, TfMessage};
+use crate::ros2::{LaserScan, Odometry, Quaternion, RosMessage, TfMessage};
 
 use super::odometry::ScansAwaitingOdometry;
-use super::{InputError, ScanRecord};
+use super::{DeclaredMount, InputError, ScanRecord};
 
 /// Where the odometry of a bag comes from.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -82,6 +82,103 @@ impl BagTopics {
 /// A frame name without the leading `/` of ROS 1 habits.
 fn frame(name: &str) -> &str {
     name.strip_prefix('/').unwrap_or(name)
+}
+
+/// The topic of the transforms that do not change.
+pub const TF_STATIC_TOPIC: &str = "/tf_static";
+/// Messages read at most for [`declared_laser_mount`]: a recorder writes
+/// `/tf_static` once, at the start.
+const MOUNT_MESSAGES: usize = 10_000;
+/// Largest roll or pitch (rad) of a mounting read as level: a scanner
+/// tilted more, or upside down, does not scan the plane its 2-D pose
+/// says.
+const MAX_TILT: f64 = 0.05;
+/// The robot's frame when the odometry does not name it.
+const BASE_FRAME: &str = "base_link";
+
+/// A static transform's 2-D pose and whether it is level.
+fn planar(translation: &crate::ros2::Vector3, rotation: &Quaternion) -> (Pose2, bool) {
+    let q = rotation;
+    let roll = (2.0 * (q.w * q.x + q.y * q.z)).atan2(1.0 - 2.0 * (q.x * q.x + q.y * q.y));
+    let pitch = (2.0 * (q.w * q.y - q.z * q.x)).clamp(-1.0, 1.0).asin();
+    let level = roll.abs() <= MAX_TILT && pitch.abs() <= MAX_TILT;
+    (Pose2::new(translation.x, translation.y, q.yaw()), level)
+}
+
+/// The laser's pose on the robot as a bag's `/tf_static` gives it: the
+/// frame of the first scan on `topics.scan` in the robot's frame (the
+/// `--tf` child, else the odometry's `child_frame_id`, else `base_link`),
+/// chained through the static transforms between them. A chain that is not
+/// level (a scanner mounted upside down) is [`DeclaredMount::Varying`]: no
+/// planar mounting to read. Messages that do not decode are passed over
+/// here; the mapping names them.
+pub fn declared_laser_mount(path: &Path, topics: &BagTopics) -> Result<DeclaredMount, InputError> {
+    let reader = BagReader::open(path)?;
+    let mut base = match &topics.odometry {
+        BagOdometry::Tf { child, .. } => Some(frame(child).to_string()),
+        _ => None,
+    };
+    let mut laser: Option<String> = None;
+    // Child frame → (parent frame, pose in it, level).
+    let mut statics: std::collections::HashMap<String, (String, Pose2, bool)> =
+        std::collections::HashMap::new();
+    for m in reader.take(MOUNT_MESSAGES) {
+        let Ok(m) = m else { break };
+        if m.topic.topic == topics.scan && laser.is_none() {
+            if let Ok(scan) = LaserScan::from_cdr(&m.data) {
+                laser = Some(frame(&scan.header.frame_id).to_string());
+            }
+        } else if m.topic.topic == TF_STATIC_TOPIC {
+            if let Ok(tf) = TfMessage::from_cdr(&m.data) {
+                for t in tf.transforms {
+                    let (pose, level) = planar(&t.translation, &t.rotation);
+                    statics.insert(
+                        frame(&t.child_frame_id).to_string(),
+                        (frame(&t.header.frame_id).to_string(), pose, level),
+                    );
+                }
+            }
+        } else if let BagOdometry::Topic(odom) = &topics.odometry
+            && m.topic.topic == *odom
+            && base.is_none()
+            && let Ok(o) = Odometry::from_cdr(&m.data)
+        {
+            base = Some(frame(&o.child_frame_id).to_string());
+        }
+        if let Some(laser) = &laser
+            && let Some(found) = mount_in(&statics, laser, base.as_deref().unwrap_or(BASE_FRAME))
+        {
+            return Ok(found);
+        }
+    }
+    Ok(DeclaredMount::None)
+}
+
+/// The pose of frame `laser` in frame `base` through the static transforms
+/// `statics` (child → parent, pose, level), if they link the two.
+fn mount_in(
+    statics: &std::collections::HashMap<String, (String, Pose2, bool)>,
+    laser: &str,
+    base: &str,
+) -> Option<DeclaredMount> {
+    let mut pose = Pose2::IDENTITY;
+    let mut level = true;
+    let mut at = laser;
+    // A tree of frames has fewer links than frames; more is a cycle.
+    for _ in 0..=statics.len() {
+        if at == base {
+            return Some(if level {
+                DeclaredMount::Fixed(pose)
+            } else {
+                DeclaredMount::Varying
+            });
+        }
+        let (parent, link, link_level) = statics.get(at)?;
+        pose = link.compose(&pose);
+        level &= link_level;
+        at = parent;
+    }
+    None
 }
 
 /// Streams the scans of a bag with the odometry at each.
@@ -418,6 +515,51 @@ pub fn laser_scan(
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_mounting_is_chained_through_level_static_transforms() {
+        let level = |x: f64, theta: f64| {
+            let q = Quaternion::from_yaw(theta);
+            planar(&crate::ros2::Vector3 { x, y: 0.0, z: 0.2 }, &q)
+        };
+        let mut statics = std::collections::HashMap::new();
+        for (child, parent, (pose, is_level)) in [
+            ("plate", "base_link", level(0.2, 0.0)),
+            ("laser", "plate", level(0.1, 0.5)),
+        ] {
+            statics.insert(child.to_string(), (parent.to_string(), pose, is_level));
+        }
+        let Some(DeclaredMount::Fixed(m)) = mount_in(&statics, "laser", "base_link") else {
+            panic!("no mounting");
+        };
+        assert!((m.x - 0.3).abs() < 1e-12 && m.y.abs() < 1e-12 && (m.theta - 0.5).abs() < 1e-12);
+        // No link to the robot's frame: nothing declared.
+        assert_eq!(mount_in(&statics, "laser", "base_footprint"), None);
+        // Upside down (rolled half a turn): no planar mounting.
+        let flipped = Quaternion {
+            x: 1.0,
+            y: 0.0,
+            z: 0.0,
+            w: 0.0,
+        };
+        let (pose, is_level) = planar(
+            &crate::ros2::Vector3 {
+                x: 0.1,
+                y: 0.0,
+                z: 0.0,
+            },
+            &flipped,
+        );
+        assert!(!is_level);
+        statics.insert("laser".into(), ("plate".into(), pose, is_level));
+        assert_eq!(
+            mount_in(&statics, "laser", "base_link"),
+            Some(DeclaredMount::Varying)
+        );
+        // A cycle ends.
+        statics.insert("base_link".into(), ("laser".into(), Pose2::IDENTITY, true));
+        assert_eq!(mount_in(&statics, "laser", "odom"), None);
+    }
     use crate::ros2::bag::{BagWriter, Durability};
     use crate::ros2::msg::{Header, Quaternion, Time, TransformStamped, Vector3};
 

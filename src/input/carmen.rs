@@ -21,7 +21,7 @@
 //! Comments (`#`), blank lines and other record types are skipped.
 
 use super::odometry::ScansAwaitingOdometry;
-use super::{InputError, ScanRecord};
+use super::{DeclaredMount, InputError, ScanRecord};
 use crate::geometry::{BeamFault, Pose2, RangeScan};
 use std::f64::consts::PI;
 use std::io::BufRead;
@@ -285,23 +285,12 @@ const MOUNT_LINES: usize = 100;
 /// one mounting: a log writes its poses to 6 decimals.
 const MOUNT_TOLERANCE: f64 = 1e-3;
 
-/// How a log says its laser sits on the robot.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum DeclaredMount {
-    /// Its lines give no laser pose apart from the robot's (FLASER,
-    /// RAWLASER, recordings, bags).
-    None,
-    /// The first [`MOUNT_LINES`] laser lines that give one all agree.
-    Fixed(Pose2),
-    /// They disagree (laser and robot poses in different frames, such as
-    /// a corrected laser pose beside raw odometry): no mounting to read.
-    Varying,
-}
-
-/// The laser's pose on the robot as the first laser lines of a CARMEN log
-/// declare it (ROBOTLASER1 carries the laser's pose beside the robot's).
-/// Lines that cannot be parsed are passed over here; the mapping names
-/// them.
+/// The laser's pose on the robot as the first [`MOUNT_LINES`] laser lines
+/// of a CARMEN log declare it (ROBOTLASER1 carries the laser's pose beside
+/// the robot's; FLASER and RAWLASER lines declare none). Mounts that
+/// disagree (a corrected laser pose beside raw odometry) are
+/// [`DeclaredMount::Varying`]. Lines that cannot be parsed are passed over
+/// here; the mapping names them.
 pub fn declared_laser_mount<R: BufRead>(mut reader: R) -> DeclaredMount {
     let mut first: Option<Pose2> = None;
     let mut seen = 0;

@@ -18,7 +18,7 @@ pub mod lms200;
 pub mod odometry;
 
 pub use bag::{BagOdometry, BagScans, BagTopics};
-pub use carmen::{CarmenEntry, CarmenScans, DeclaredMount, MalformedLine, NO_RETURN_RANGE};
+pub use carmen::{CarmenEntry, CarmenScans, MalformedLine, NO_RETURN_RANGE};
 pub use odometry::{OdometryError, OdometryTrack};
 
 use crate::geometry::{Pose2, RangeScan};
@@ -28,6 +28,18 @@ use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
 use thiserror::Error;
+
+/// How a log says its laser sits on the robot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum DeclaredMount {
+    /// It gives no laser pose apart from the robot's.
+    None,
+    /// One pose of the laser in the robot frame (m, rad).
+    Fixed(Pose2),
+    /// Poses that disagree, or a laser that does not scan the robot's
+    /// plane (tilted, upside down): no planar mounting to read.
+    Varying,
+}
 
 /// One scan and the odometry pose (odometry frame, m/rad) at the scan's
 /// time, if the source has odometry.
@@ -265,13 +277,18 @@ fn log_kind(path: &Path) -> Result<Option<(LogKind, File)>, InputError> {
     Ok(Some((kind, file)))
 }
 
-/// How the log at `path` says its laser sits on the robot (see
-/// [`carmen::declared_laser_mount`]); recordings and bags declare nothing
-/// here.
-pub fn declared_laser_mount(path: &Path) -> Result<DeclaredMount, InputError> {
+/// How the log at `path` says its laser sits on the robot: a CARMEN log
+/// by its laser lines ([`carmen::declared_laser_mount`]), a bag by its
+/// `/tf_static` ([`bag::declared_laser_mount`], with `options`' topics); a
+/// recording declares none.
+pub fn declared_laser_mount(
+    path: &Path,
+    options: &LogOptions,
+) -> Result<DeclaredMount, InputError> {
     Ok(match log_kind(path)? {
         Some((LogKind::Carmen, file)) => carmen::declared_laser_mount(BufReader::new(file)),
-        _ => DeclaredMount::None,
+        Some((LogKind::Recording, _)) => DeclaredMount::None,
+        None => bag::declared_laser_mount(path, &options.bag)?,
     })
 }
 
