@@ -58,11 +58,15 @@ def main(src, dst):
                     [math.inf if (v <= 0 or v >= NO_RETURN) else v for v in ranges],
                     dtype=np.float32,
                 )
+                # As CARMEN reads FLASER: from -90 degrees, 1 degree apart for
+                # 180 or 181 beams, 0.5 for 360 or 361, else over 180 degrees.
+                step = {180: 1.0, 181: 1.0, 360: 0.5, 361: 0.5}.get(n)
+                inc = math.radians(step) if step else math.pi / (n - 1)
                 scan = LaserScan(
                     header=header,
                     angle_min=-math.pi / 2,
-                    angle_max=math.pi / 2,
-                    angle_increment=math.pi / (n - 1),
+                    angle_max=-math.pi / 2 + (n - 1) * inc,
+                    angle_increment=inc,
                     time_increment=0.0,
                     scan_time=0.0,
                     range_min=0.0,

@@ -403,8 +403,12 @@ struct MountedLoop {
 }
 
 fn loop_with_laser_at(mount: Pose2) -> MountedLoop {
+    loop_scanned(mount, ScanSpec::lms200_half_degree(0.01))
+}
+
+/// [`loop_with_laser_at`] with the scanner `spec`.
+fn loop_scanned(mount: Pose2, spec: ScanSpec) -> MountedLoop {
     let world = World::loop_around_block();
-    let spec = ScanSpec::lms200_half_degree(0.01);
     let mut rng = Rng::new(11);
     let corners: [[f64; 2]; 5] = [[1.0, 1.0], [11.0, 1.0], [11.0, 9.0], [1.0, 9.0], [1.0, 1.0]];
     let truth = tour(&corners, 1, 0.1);
@@ -515,6 +519,65 @@ fn a_robotlaser_log_is_mapped_with_the_laser_mount_it_declares() {
     }
     std::fs::write(&input, text).unwrap();
     map_with_and_without_the_declared_mount(&input, &lp, mount);
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+/// A FLASER log of 180 beams, as logs of an LMS200 that dropped its last
+/// beam are (the Intel lab's): CARMEN reads them 1° apart from −90°, the
+/// last at +89°. Spread over the whole 180° instead, beams near the end of
+/// the sweep land up to a degree off, and the walls bend.
+#[test]
+fn a_flaser_log_of_180_beams_is_read_one_degree_apart() {
+    let spec = ScanSpec {
+        beams: 180,
+        angle_increment: std::f64::consts::PI / 180.0,
+        ..ScanSpec::lms200_half_degree(0.01)
+    };
+    let lp = loop_scanned(Pose2::IDENTITY, spec);
+    let out = std::env::temp_dir().join(format!("clsmap-flaser180-{}", std::process::id()));
+    std::fs::create_dir_all(&out).unwrap();
+    let input = out.join("flaser180.clf");
+    let mut text = String::new();
+    for (scan, o) in lp.scans.iter().zip(&lp.odometry) {
+        let ranges: Vec<String> = scan
+            .ranges
+            .iter()
+            .map(|r| format!("{:.3}", r.unwrap_or(81.91)))
+            .collect();
+        text += &format!(
+            "FLASER {} {} {} {} {} {} {} {} {} host {}\n",
+            ranges.len(),
+            ranges.join(" "),
+            o.x,
+            o.y,
+            o.theta,
+            o.x,
+            o.y,
+            o.theta,
+            scan.t,
+            scan.t,
+        );
+    }
+    std::fs::write(&input, text).unwrap();
+    let dir = out.join("map");
+    run_offline_mapping(
+        &input,
+        &dir,
+        &MapperConfig::default(),
+        &MapRunOptions::default(),
+        &mut |_| {},
+    )
+    .unwrap();
+    let tum = read_tum(std::io::BufReader::new(
+        std::fs::File::open(dir.join("trajectory.tum")).unwrap(),
+    ))
+    .unwrap();
+    let e = evaluate(&tum, &lp.relations);
+    show("FLASER, 180 beams", &e);
+    assert_eq!(e.used, lp.relations.len());
+    // Read spread over 180°: 0.010 ± 0.025 m.
+    assert!(e.translation_m.mean < 0.006, "{e:?}");
+    assert!(e.translation_m.max < 0.05, "{e:?}");
     std::fs::remove_dir_all(&out).unwrap();
 }
 

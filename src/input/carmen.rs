@@ -14,8 +14,9 @@
 //!             tv rv forward_safety side_safety turn_axis   ipc_t host logger_t
 //! ```
 //!
-//! FLASER beams span 180° from −90° (the old front-laser message carries no
-//! geometry). FLASER's odometry is the `odom_*` triple (`x y theta` may be a
+//! FLASER beams start at −90° (the old front-laser message carries no
+//! geometry), 1° apart for 180 or 181 of them, 0.5° for 360 or 361, as
+//! CARMEN reads them, else spread over 180°. FLASER's odometry is the `odom_*` triple (`x y theta` may be a
 //! corrected pose), ROBOTLASER1's is the robot pose. RAWLASER lines carry no
 //! pose: their odometry is interpolated from the ODOM lines around them.
 //! Comments (`#`), blank lines and other record types are skipped.
@@ -78,6 +79,19 @@ pub enum CarmenEntry {
     },
     /// A standalone odometry sample.
     Odometry { t: f64, pose: Pose2 },
+}
+
+/// Beam spacing (rad) of a FLASER line of `n` beams, which carries no
+/// geometry; the beams start at −90°. As CARMEN reads them: 1° for 181
+/// beams and for 180 (an LMS200's 181 less its last, as in the Intel lab's
+/// log), 0.5° for 361 and 360; otherwise 180° spread over the beams.
+fn flaser_increment(n: usize) -> f64 {
+    match n {
+        180 | 181 => PI / 180.0,
+        360 | 361 => PI / 360.0,
+        n if n > 1 => PI / (n - 1) as f64,
+        _ => PI,
+    }
 }
 
 /// Converts one logged range (m) into a beam: the no-return code, zero,
@@ -217,7 +231,7 @@ pub fn parse_line(line: &str) -> Result<Option<CarmenEntry>, MalformedLine> {
             f.pose("x", "y", "theta")?;
             let odom = f.pose("odom_x", "odom_y", "odom_theta")?;
             let t = f.tail()?;
-            let angle_increment = if n > 1 { PI / (n - 1) as f64 } else { PI };
+            let angle_increment = flaser_increment(n);
             CarmenEntry::Laser {
                 scan: RangeScan {
                     t,
@@ -456,6 +470,28 @@ mod tests {
             vec![Ok(1.0), Err(BeamFault::NoReturn), Ok(2.5)]
         );
         assert_eq!(odometry, Some(Pose2::new(576.5, 0.1, -2.2)));
+    }
+
+    #[test]
+    fn flaser_of_180_beams_is_read_one_degree_apart() {
+        let ranges = vec!["2.0"; 180];
+        let line = flaser(&ranges, (0.0, 0.0, 0.0), 1.0);
+        let Some(CarmenEntry::Laser { scan, .. }) = parse_line(&line).unwrap() else {
+            panic!("not a laser entry");
+        };
+        assert_eq!(scan.angle_min, -PI / 2.0);
+        assert!((scan.angle(179) - 89f64.to_radians()).abs() < 1e-12);
+        for (n, degrees) in [(181, 1.0), (360, 0.5), (361, 0.5), (91, 2.0)] {
+            let ranges = vec!["2.0"; n];
+            let line = flaser(&ranges, (0.0, 0.0, 0.0), 1.0);
+            let Some(CarmenEntry::Laser { scan, .. }) = parse_line(&line).unwrap() else {
+                panic!("not a laser entry");
+            };
+            assert!(
+                (scan.angle_increment - f64::to_radians(degrees)).abs() < 1e-12,
+                "{n}"
+            );
+        }
     }
 
     #[test]
