@@ -391,6 +391,33 @@ fn simulated_loop_with_biased_odometry() {
     assert!(mapper.map().len() < 40, "{} segments", mapper.map().len());
 }
 
+/// A scan's ranges as a CARMEN line writes them, `no_return` for a beam
+/// without an echo: the count, then each.
+fn carmen_ranges(scan: &clsmap::geometry::RangeScan, no_return: f64) -> String {
+    let ranges: Vec<String> = scan
+        .ranges
+        .iter()
+        .map(|r| format!("{:.3}", r.unwrap_or(no_return)))
+        .collect();
+    format!("{} {}", ranges.len(), ranges.join(" "))
+}
+
+/// Maps `input` offline with `config` into `out`; the summary and the
+/// trajectory written.
+fn map_into(
+    input: &std::path::Path,
+    out: &std::path::Path,
+    config: &MapperConfig,
+) -> (clsmap::pipeline::MappingSummary, Vec<(f64, Pose2)>) {
+    let summary =
+        run_offline_mapping(input, out, config, &MapRunOptions::default(), &mut |_| {}).unwrap();
+    let tum = read_tum(std::io::BufReader::new(
+        std::fs::File::open(out.join("trajectory.tum")).unwrap(),
+    ))
+    .unwrap();
+    (summary, tum)
+}
+
 /// The loop world driven once with the laser at `mount` on the robot, the
 /// odometry 1 % long: the scans (laser frame), the odometry, and the
 /// relations between the true poses (consecutive, and from the start to
@@ -459,12 +486,7 @@ fn map_with_and_without_the_declared_mount(
         "{read:?}"
     );
     let score = |config: &MapperConfig, name: &str| {
-        let dir = input.with_extension(name.replace(' ', "_"));
-        run_offline_mapping(input, &dir, config, &MapRunOptions::default(), &mut |_| {}).unwrap();
-        let tum = read_tum(std::io::BufReader::new(
-            std::fs::File::open(dir.join("trajectory.tum")).unwrap(),
-        ))
-        .unwrap();
+        let (_, tum) = map_into(input, &input.with_extension(name.replace(' ', "_")), config);
         let e = evaluate(&tum, &lp.relations);
         show(name, &e);
         assert_eq!(e.used, lp.relations.len());
@@ -488,25 +510,18 @@ fn map_with_and_without_the_declared_mount(
 fn a_robotlaser_log_is_mapped_with_the_laser_mount_it_declares() {
     let mount = Pose2::new(0.25, 0.0, 0.0);
     let lp = loop_with_laser_at(mount);
-    let out = std::env::temp_dir().join(format!("clsmap-robotlaser-{}", std::process::id()));
-    std::fs::create_dir_all(&out).unwrap();
-    let input = out.join("robotlaser.clf");
+    let out = tempfile::tempdir().unwrap();
+    let input = out.path().join("robotlaser.clf");
     let mut text = String::new();
     for (scan, o) in lp.scans.iter().zip(&lp.odometry) {
-        let ranges: Vec<String> = scan
-            .ranges
-            .iter()
-            .map(|r| format!("{:.3}", r.unwrap_or(lp.spec.max_range)))
-            .collect();
         let laser = o.compose(&mount);
         text += &format!(
-            "ROBOTLASER1 0 {} {} {} {} 0.01 0 {} {} 0 {} {} {} {} {} {} 0 0 0 0 0 {} host {}\n",
+            "ROBOTLASER1 0 {} {} {} {} 0.01 0 {} 0 {} {} {} {} {} {} 0 0 0 0 0 {} host {}\n",
             lp.spec.angle_min,
             lp.spec.angle_increment * (lp.spec.beams - 1) as f64,
             lp.spec.angle_increment,
             lp.spec.max_range,
-            ranges.len(),
-            ranges.join(" "),
+            carmen_ranges(scan, lp.spec.max_range),
             laser.x,
             laser.y,
             laser.theta,
@@ -519,7 +534,6 @@ fn a_robotlaser_log_is_mapped_with_the_laser_mount_it_declares() {
     }
     std::fs::write(&input, text).unwrap();
     map_with_and_without_the_declared_mount(&input, &lp, mount);
-    std::fs::remove_dir_all(&out).unwrap();
 }
 
 /// A FLASER log of 180 beams, as logs of an LMS200 that dropped its last
@@ -534,20 +548,13 @@ fn a_flaser_log_of_180_beams_is_read_one_degree_apart() {
         ..ScanSpec::lms200_half_degree(0.01)
     };
     let lp = loop_scanned(Pose2::IDENTITY, spec);
-    let out = std::env::temp_dir().join(format!("clsmap-flaser180-{}", std::process::id()));
-    std::fs::create_dir_all(&out).unwrap();
-    let input = out.join("flaser180.clf");
+    let out = tempfile::tempdir().unwrap();
+    let input = out.path().join("flaser180.clf");
     let mut text = String::new();
     for (scan, o) in lp.scans.iter().zip(&lp.odometry) {
-        let ranges: Vec<String> = scan
-            .ranges
-            .iter()
-            .map(|r| format!("{:.3}", r.unwrap_or(81.91)))
-            .collect();
         text += &format!(
-            "FLASER {} {} {} {} {} {} {} {} {} host {}\n",
-            ranges.len(),
-            ranges.join(" "),
+            "FLASER {} {} {} {} {} {} {} {} host {}\n",
+            carmen_ranges(scan, 81.91),
             o.x,
             o.y,
             o.theta,
@@ -559,26 +566,13 @@ fn a_flaser_log_of_180_beams_is_read_one_degree_apart() {
         );
     }
     std::fs::write(&input, text).unwrap();
-    let dir = out.join("map");
-    run_offline_mapping(
-        &input,
-        &dir,
-        &MapperConfig::default(),
-        &MapRunOptions::default(),
-        &mut |_| {},
-    )
-    .unwrap();
-    let tum = read_tum(std::io::BufReader::new(
-        std::fs::File::open(dir.join("trajectory.tum")).unwrap(),
-    ))
-    .unwrap();
+    let (_, tum) = map_into(&input, &out.path().join("map"), &MapperConfig::default());
     let e = evaluate(&tum, &lp.relations);
     show("FLASER, 180 beams", &e);
     assert_eq!(e.used, lp.relations.len());
     // Read spread over 180°: 0.010 ± 0.025 m.
     assert!(e.translation_m.mean < 0.006, "{e:?}");
     assert!(e.translation_m.max < 0.05, "{e:?}");
-    std::fs::remove_dir_all(&out).unwrap();
 }
 
 /// A bag of the same drive with the laser behind the robot's centre and
@@ -594,9 +588,8 @@ fn a_bag_is_mapped_with_the_laser_mount_its_tf_static_gives() {
     let on_plate = Pose2::new(-0.1, 0.0, 0.05);
     let mount = plate.compose(&on_plate);
     let lp = loop_with_laser_at(mount);
-    let out = std::env::temp_dir().join(format!("clsmap-bag-mount-{}", std::process::id()));
-    std::fs::create_dir_all(&out).unwrap();
-    let input = out.join("drive.mcap");
+    let out = tempfile::tempdir().unwrap();
+    let input = out.path().join("drive.mcap");
     let mut bag = BagWriter::create(&input).unwrap();
     let mut scans = bag
         .topic::<LaserScan>("/scan", Durability::Volatile)
@@ -650,7 +643,6 @@ fn a_bag_is_mapped_with_the_laser_mount_its_tf_static_gives() {
     }
     bag.finish().unwrap();
     map_with_and_without_the_declared_mount(&input, &lp, mount);
-    std::fs::remove_dir_all(&out).unwrap();
 }
 
 /// The library entry point writes a readable trajectory (one pose per scan,
@@ -947,19 +939,7 @@ fn a_rosbags_bag_of_the_csail_log_maps_as_the_carmen_log() {
     assert!(bag.join("metadata.yaml").is_file());
 
     let map = |input: &std::path::Path, name: &str| {
-        let out = work.path().join(name);
-        let summary = run_offline_mapping(
-            input,
-            &out,
-            &MapperConfig::default(),
-            &MapRunOptions::default(),
-            &mut |_| {},
-        )
-        .unwrap();
-        let tum = read_tum(std::io::BufReader::new(
-            std::fs::File::open(out.join("trajectory.tum")).unwrap(),
-        ))
-        .unwrap();
+        let (summary, tum) = map_into(input, &work.path().join(name), &MapperConfig::default());
         let errors =
             clsmap::pipeline::evaluate_relations(&tum, &dir.join("mit-csail.relations")).unwrap();
         (summary, tum, errors)

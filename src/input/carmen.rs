@@ -452,6 +452,18 @@ mod tests {
         CarmenScans::new(text.as_bytes()).collect()
     }
 
+    /// The scan, odometry and mounting of a laser line.
+    fn laser(line: &str) -> (RangeScan, Option<Pose2>, Option<Pose2>) {
+        match parse_line(line).unwrap() {
+            Some(CarmenEntry::Laser {
+                scan,
+                odometry,
+                mount,
+            }) => (scan, odometry, mount),
+            other => panic!("not a laser entry: {other:?}"),
+        }
+    }
+
     #[test]
     fn flaser_spans_180_degrees_and_marks_no_return() {
         let line = flaser(
@@ -459,9 +471,7 @@ mod tests {
             (576.5, 0.1, -2.2),
             1134864629.895182,
         );
-        let Some(CarmenEntry::Laser { scan, odometry, .. }) = parse_line(&line).unwrap() else {
-            panic!("not a laser entry");
-        };
+        let (scan, odometry, _) = laser(&line);
         assert_eq!(scan.t, 1134864629.895182);
         assert_eq!(scan.angle_min, -PI / 2.0);
         assert!((scan.fov() - PI).abs() < 1e-12);
@@ -476,17 +486,13 @@ mod tests {
     fn flaser_of_180_beams_is_read_one_degree_apart() {
         let ranges = vec!["2.0"; 180];
         let line = flaser(&ranges, (0.0, 0.0, 0.0), 1.0);
-        let Some(CarmenEntry::Laser { scan, .. }) = parse_line(&line).unwrap() else {
-            panic!("not a laser entry");
-        };
+        let (scan, ..) = laser(&line);
         assert_eq!(scan.angle_min, -PI / 2.0);
         assert!((scan.angle(179) - 89f64.to_radians()).abs() < 1e-12);
         for (n, degrees) in [(181, 1.0), (360, 0.5), (361, 0.5), (91, 2.0)] {
             let ranges = vec!["2.0"; n];
             let line = flaser(&ranges, (0.0, 0.0, 0.0), 1.0);
-            let Some(CarmenEntry::Laser { scan, .. }) = parse_line(&line).unwrap() else {
-                panic!("not a laser entry");
-            };
+            let (scan, ..) = laser(&line);
             assert!(
                 (scan.angle_increment - f64::to_radians(degrees)).abs() < 1e-12,
                 "{n}"
@@ -509,14 +515,7 @@ mod tests {
     fn rawlaser_carries_its_own_geometry() {
         let line = "RAWLASER1 0 -1.5 3.0 0.0175 8.0 0.01 0 3 1.0 8.0 2.0 \
                     2 100 200 12.5 host 12.6";
-        let Some(CarmenEntry::Laser {
-            scan,
-            odometry,
-            mount,
-        }) = parse_line(line).unwrap()
-        else {
-            panic!("not a laser entry");
-        };
+        let (scan, odometry, mount) = laser(line);
         assert_eq!(scan.angle_min, -1.5);
         assert_eq!(scan.angle_increment, 0.0175);
         assert_eq!(
@@ -532,14 +531,7 @@ mod tests {
     fn robotlaser_uses_the_robot_pose_as_odometry() {
         let line = "ROBOTLASER1 0 -1.5708 3.1416 0.5 81.9 0.01 0 2 1.5 2.5 0 \
                     1.1 2.1 0.3 1.0 2.0 0.3 0.2 0.0 0.5 0.2 0.0 7.25 host 7.3";
-        let Some(CarmenEntry::Laser {
-            scan,
-            odometry,
-            mount,
-        }) = parse_line(line).unwrap()
-        else {
-            panic!("not a laser entry");
-        };
+        let (scan, odometry, mount) = laser(line);
         assert_eq!(scan.ranges, vec![Ok(1.5), Ok(2.5)]);
         assert_eq!(odometry, Some(Pose2::new(1.0, 2.0, 0.3)));
         assert_eq!(scan.t, 7.25);
