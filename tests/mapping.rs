@@ -12,7 +12,9 @@ use clsmap::files::trajectory::read_tum;
 use clsmap::geometry::Pose2;
 use clsmap::input::{DeclaredMount, LogOptions, ScanRecord, open_log};
 use clsmap::pipeline::config::MapperConfig;
-use clsmap::pipeline::{MapRunOptions, Mapper, Progress, run_offline_mapping, take_declared_mount};
+use clsmap::pipeline::{
+    MapRunOptions, Mapper, Progress, run_offline_mapping, take_declared_mount, take_no_return_code,
+};
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
 use std::path::PathBuf;
 
@@ -573,6 +575,71 @@ fn a_flaser_log_of_180_beams_is_read_one_degree_apart() {
     // Read spread over 180°: 0.010 ± 0.025 m.
     assert!(e.translation_m.mean < 0.006, "{e:?}");
     assert!(e.translation_m.max < 0.05, "{e:?}");
+}
+
+/// A FLASER log that writes its own code for no return (20 m, or 50 m)
+/// instead of the SICK one: `clsmap map` finds the code, the longest
+/// reading that many beams of several scans read exactly, and takes those
+/// beams as no echo. Read as echoes, a 20 m code drew arcs that became
+/// walls and bent the trajectory; a 50 m one gave the CLS map free space
+/// through its walls.
+#[test]
+fn a_log_s_own_code_for_no_return_is_no_echo() {
+    let lp = loop_scanned(Pose2::IDENTITY, ScanSpec::lms200_half_degree(0.01));
+    let out = tempfile::tempdir().unwrap();
+    let map_with = |code: f64, detect: bool| {
+        let input = out.path().join(format!("code{code}.clf"));
+        let mut text = String::new();
+        for (scan, o) in lp.scans.iter().zip(&lp.odometry) {
+            text += &format!(
+                "FLASER {} {} {} {} {} {} {} {} host {}\n",
+                carmen_ranges(scan, code),
+                o.x,
+                o.y,
+                o.theta,
+                o.x,
+                o.y,
+                o.theta,
+                scan.t,
+                scan.t,
+            );
+        }
+        std::fs::write(&input, text).unwrap();
+        let mut config = MapperConfig::default();
+        if detect {
+            let found = take_no_return_code(&mut config, &input).unwrap();
+            assert_eq!(found, (code < 81.9).then_some(code));
+        }
+        let name = format!(
+            "code {code}, {}",
+            if detect { "found" } else { "read as echoes" }
+        );
+        let (summary, tum) = map_into(&input, &out.path().join(&name), &config);
+        let e = evaluate(&tum, &lp.relations);
+        show(&name, &e);
+        (summary, e)
+    };
+    let (sick, sick_e) = map_with(81.91, true);
+    for code in [20.0, 50.0] {
+        let (found, found_e) = map_with(code, true);
+        let (echoes, echoes_e) = map_with(code, false);
+        // Found, the code changes nothing: the map is the SICK code's.
+        assert_eq!(found.segments, sick.segments, "{code}");
+        assert_eq!(
+            (found.cls_actual, found.cls_virtual),
+            (sick.cls_actual, sick.cls_virtual)
+        );
+        assert!((found_e.translation_m.mean - sick_e.translation_m.mean).abs() < 1e-9);
+        // Read as echoes, it does harm.
+        assert!(
+            echoes.cls_virtual > 2 * sick.cls_virtual,
+            "{code}: {echoes:?}"
+        );
+        if code < 30.0 {
+            assert!(echoes.segments > 2 * sick.segments, "{echoes:?}");
+            assert!(echoes_e.translation_m.mean > 5.0 * found_e.translation_m.mean);
+        }
+    }
 }
 
 /// A bag of the same drive with the laser behind the robot's centre and

@@ -238,14 +238,16 @@ pub fn render(
 
 /// The mapper configuration from `path` (TOML), or the defaults; where it
 /// leaves `laser_mount` out, the laser's mounting as the log `input`
-/// (read with `log`) declares it (see [`pipeline::take_declared_mount`]).
+/// (read with `log`) declares it (see [`pipeline::take_declared_mount`]),
+/// and where it leaves `extraction.max_range` out, the ranges end under
+/// the log's own code for no return ([`pipeline::take_no_return_code`]).
 pub fn mapper_config(
     path: Option<&Path>,
     input: &Path,
     log: &LogOptions,
 ) -> anyhow::Result<MapperConfig> {
-    let (mut config, sets_mount) = match path {
-        None => (MapperConfig::default(), false),
+    let (mut config, sets_mount, sets_max_range) = match path {
+        None => (MapperConfig::default(), false, false),
         Some(path) => {
             let text = clsmap::files::durable::read_bounded(
                 path,
@@ -254,12 +256,24 @@ pub fn mapper_config(
             .with_context(|| format!("cannot read the configuration {}", path.display()))?;
             let config = MapperConfig::from_toml(&text)
                 .with_context(|| format!("invalid configuration {}", path.display()))?;
-            let sets_mount = text
-                .parse::<toml::Table>()
-                .is_ok_and(|t| t.contains_key("laser_mount"));
-            (config, sets_mount)
+            let table = text.parse::<toml::Table>().unwrap_or_default();
+            let sets_mount = table.contains_key("laser_mount");
+            let sets_max_range = table
+                .get("extraction")
+                .and_then(toml::Value::as_table)
+                .is_some_and(|e| e.contains_key("max_range"));
+            (config, sets_mount, sets_max_range)
         }
     };
+    if !sets_max_range
+        && let Some(code) = pipeline::take_no_return_code(&mut config, input)
+            .with_context(|| format!("cannot read {}", input.display()))?
+    {
+        println!(
+            "{} writes {code} m for a beam without an echo: such readings are no echo",
+            input.display()
+        );
+    }
     if !sets_mount {
         let declared = pipeline::take_declared_mount(&mut config, input, log)
             .with_context(|| format!("cannot read {}", input.display()))?;

@@ -336,6 +336,48 @@ pub fn declared_laser_mount<R: BufRead>(mut reader: R) -> DeclaredMount {
     first.map_or(DeclaredMount::None, DeclaredMount::Fixed)
 }
 
+/// Laser lines read for [`repeated_no_return`].
+const NO_RETURN_LINES: usize = 500;
+/// Beams of one scan that read a candidate exactly ...
+const NO_RETURN_BEAMS: usize = 5;
+/// ... in this many scans make it the log's code for no return.
+const NO_RETURN_SCANS: usize = 5;
+
+/// The range (m) a CARMEN log writes for a beam without an echo, where it
+/// writes one below the SICK codes (81.9 m and up, which are always read
+/// as none): the longest reading of its first [`NO_RETURN_LINES`] laser
+/// lines, when [`NO_RETURN_BEAMS`] beams of each of [`NO_RETURN_SCANS`]
+/// scans read exactly it. A real surface that far is read with its noise
+/// and resolution, a beam or two at one value; a code is read by every
+/// beam that meets nothing. Lines that cannot be parsed are passed over.
+pub fn repeated_no_return<R: BufRead>(mut reader: R) -> Option<f64> {
+    // Each scan's longest reading and how many beams read it.
+    let mut longest: Vec<(f64, usize)> = Vec::new();
+    let mut buf = Vec::new();
+    while longest.len() < NO_RETURN_LINES {
+        buf.clear();
+        if !matches!(reader.read_until(b'\n', &mut buf), Ok(n) if n > 0) {
+            break;
+        }
+        let Ok(Ok(Some(CarmenEntry::Laser { scan, .. }))) =
+            std::str::from_utf8(&buf).map(parse_line)
+        else {
+            continue;
+        };
+        let echoes = || scan.ranges.iter().filter_map(|r| r.as_ref().ok().copied());
+        let Some(max) = echoes().reduce(f64::max) else {
+            continue;
+        };
+        longest.push((max, echoes().filter(|&r| r == max).count()));
+    }
+    let max = longest.iter().map(|&(m, _)| m).reduce(f64::max)?;
+    let repeated = longest
+        .iter()
+        .filter(|&&(m, n)| m == max && n >= NO_RETURN_BEAMS)
+        .count();
+    (repeated >= NO_RETURN_SCANS).then_some(max)
+}
+
 /// Streams the scans of a CARMEN log with the odometry pose at each scan.
 ///
 /// Scans are yielded in file order. A scan whose line carries no pose
@@ -577,6 +619,27 @@ mod tests {
         // FLASER declares none.
         let flaser = flaser(&["1.0", "2.0"], (1.0, 2.0, 0.3), 5.0);
         assert_eq!(declared_laser_mount(flaser.as_bytes()), DeclaredMount::None);
+    }
+
+    #[test]
+    fn a_repeated_longest_reading_is_the_logs_code_for_no_return() {
+        // Scans of a room whose open side reads 50.0, the log's code.
+        let scan = |code: &str, t: f64| {
+            let mut ranges: Vec<String> = (0..20)
+                .map(|i| format!("{:.2}", 3.0 + 0.01 * i as f64))
+                .collect();
+            ranges.extend(std::iter::repeat_n(code.to_string(), 6));
+            let ranges: Vec<&str> = ranges.iter().map(String::as_str).collect();
+            flaser(&ranges, (0.0, 0.0, 0.0), t)
+        };
+        let log: String = (0..6).map(|k| scan("50.0", k as f64)).collect();
+        assert_eq!(repeated_no_return(log.as_bytes()), Some(50.0));
+        // The SICK code is read as no return anyway: nothing to find.
+        let log: String = (0..6).map(|k| scan("81.91", k as f64)).collect();
+        assert_eq!(repeated_no_return(log.as_bytes()), None);
+        // Too few scans repeat it: a far wall, not a code.
+        let log: String = (0..4).map(|k| scan("50.0", k as f64)).collect();
+        assert_eq!(repeated_no_return(log.as_bytes()), None);
     }
 
     #[test]

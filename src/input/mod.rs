@@ -292,6 +292,17 @@ pub fn declared_laser_mount(
     })
 }
 
+/// The range (m) the log at `path` writes for a beam without an echo, where
+/// it writes one other than the SICK codes (see
+/// [`carmen::repeated_no_return`]); recordings and bags mark those beams
+/// themselves.
+pub fn no_return_code(path: &Path) -> Result<Option<f64>, InputError> {
+    Ok(match log_kind(path)? {
+        Some((LogKind::Carmen, file)) => carmen::repeated_no_return(BufReader::new(file)),
+        _ => None,
+    })
+}
+
 /// Opens a log file for streaming; see [`LogFile::open`].
 pub fn open_log(path: &Path) -> Result<LogFile, InputError> {
     LogFile::open(path)

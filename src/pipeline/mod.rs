@@ -51,7 +51,7 @@ pub use config::MapperConfig;
 pub use mapper::Mapper;
 pub use offline::{
     MapRunOptions, Progress, SKIPPED_EXAMPLES, evaluate_relations, run_offline_mapping,
-    take_declared_mount,
+    take_declared_mount, take_no_return_code,
 };
 pub use output::{
     MAP_FILE, PICTURE_FILE, TRAJECTORY_FILE, create_output_dir, write_maps, write_outputs,
