@@ -298,11 +298,16 @@ const MOUNT_LINES: usize = 100;
 /// How far (m, rad) the mounts those lines declare may differ and still be
 /// one mounting: a log writes its poses to 6 decimals.
 const MOUNT_TOLERANCE: f64 = 1e-3;
+/// Farthest a laser sits from its robot's centre (m): a "mounting" farther
+/// off is the offset between two frames (a corrected laser pose beside raw
+/// odometry, both still while the log begins).
+const MAX_MOUNT_OFFSET: f64 = 2.0;
 
 /// The laser's pose on the robot as the first [`MOUNT_LINES`] laser lines
 /// of a CARMEN log declare it (ROBOTLASER1 carries the laser's pose beside
 /// the robot's; FLASER and RAWLASER lines declare none). Mounts that
-/// disagree (a corrected laser pose beside raw odometry) are
+/// disagree, or one farther than [`MAX_MOUNT_OFFSET`] from the robot's
+/// centre (a corrected laser pose beside raw odometry), are
 /// [`DeclaredMount::Varying`]. Lines that cannot be parsed are passed over
 /// here; the mapping names them.
 pub fn declared_laser_mount<R: BufRead>(mut reader: R) -> DeclaredMount {
@@ -333,25 +338,43 @@ pub fn declared_laser_mount<R: BufRead>(mut reader: R) -> DeclaredMount {
             (None, _) => {}
         }
     }
-    first.map_or(DeclaredMount::None, DeclaredMount::Fixed)
+    match first {
+        None => DeclaredMount::None,
+        Some(m) if m.x.hypot(m.y) > MAX_MOUNT_OFFSET => DeclaredMount::Varying,
+        Some(m) => DeclaredMount::Fixed(m),
+    }
 }
 
 /// Laser lines read for [`repeated_no_return`].
 const NO_RETURN_LINES: usize = 500;
-/// Beams of one scan that read a candidate exactly ...
+/// Beams of one scan that read a candidate exactly, in runs whose
+/// neighbours read none or read far nearer ...
 const NO_RETURN_BEAMS: usize = 5;
 /// ... in this many scans make it the log's code for no return.
 const NO_RETURN_SCANS: usize = 5;
+/// How far nearer (m) a beam beside a candidate must read: a wall beyond
+/// the others, seen square on, gives neighbours within centimetres of one
+/// another (at a centimetre's resolution several may read one value).
+const NO_RETURN_STEP: f64 = 1.0;
+/// The LMS200's 8 m (mm) mode writes its special values (no echo,
+/// dazzled, out of range) as 8183–8191 mm: a log that never reads beyond
+/// them, and reads them, has them as its codes.
+const MM_MODE_CODES: [f64; 2] = [8.183, 8.191];
 
-/// The range (m) a CARMEN log writes for a beam without an echo, where it
-/// writes one below the SICK codes (81.9 m and up, which are always read
-/// as none): the longest reading of its first [`NO_RETURN_LINES`] laser
-/// lines, when [`NO_RETURN_BEAMS`] beams of each of [`NO_RETURN_SCANS`]
-/// scans read exactly it. A real surface that far is read with its noise
-/// and resolution, a beam or two at one value; a code is read by every
-/// beam that meets nothing. Lines that cannot be parsed are passed over.
+/// The shortest range (m) a CARMEN log writes for a beam without an echo,
+/// where it writes one below the SICK cm-mode codes (81.9 m and up, always
+/// read as none), from its first [`NO_RETURN_LINES`] laser lines:
+/// - 8.183 m when none of them reads beyond 8.191 m and one reads in
+///   between: the 8 m mode's special values;
+/// - else their longest reading, when [`NO_RETURN_BEAMS`] beams of each of
+///   [`NO_RETURN_SCANS`] scans read exactly it, in runs whose neighbours
+///   read none or read more than [`NO_RETURN_STEP`] nearer. A code is read
+///   by every beam that meets nothing; a real surface that far by beams
+///   beside others that read it within its noise.
+///
+/// Lines that cannot be parsed are passed over.
 pub fn repeated_no_return<R: BufRead>(mut reader: R) -> Option<f64> {
-    // Each scan's longest reading and how many beams read it.
+    // Each scan's longest reading and how many beams read it as a code.
     let mut longest: Vec<(f64, usize)> = Vec::new();
     let mut buf = Vec::new();
     while longest.len() < NO_RETURN_LINES {
@@ -364,13 +387,34 @@ pub fn repeated_no_return<R: BufRead>(mut reader: R) -> Option<f64> {
         else {
             continue;
         };
-        let echoes = || scan.ranges.iter().filter_map(|r| r.as_ref().ok().copied());
-        let Some(max) = echoes().reduce(f64::max) else {
+        let range = |i: usize| scan.ranges.get(i).and_then(|r| r.as_ref().ok().copied());
+        let Some(max) = (0..scan.ranges.len()).filter_map(range).reduce(f64::max) else {
             continue;
         };
-        longest.push((max, echoes().filter(|&r| r == max).count()));
+        // Runs of beams that read it, counted where the beams on either
+        // side read none or read far nearer.
+        let apart = |j: Option<usize>| j.and_then(range).is_none_or(|r| r < max - NO_RETURN_STEP);
+        let mut codes = 0;
+        let mut i = 0;
+        while i < scan.ranges.len() {
+            if range(i) != Some(max) {
+                i += 1;
+                continue;
+            }
+            let first = i;
+            while range(i) == Some(max) {
+                i += 1;
+            }
+            if apart(first.checked_sub(1)) && apart(Some(i)) {
+                codes += i - first;
+            }
+        }
+        longest.push((max, codes));
     }
     let max = longest.iter().map(|&(m, _)| m).reduce(f64::max)?;
+    if (MM_MODE_CODES[0]..=MM_MODE_CODES[1]).contains(&max) {
+        return Some(MM_MODE_CODES[0]);
+    }
     let repeated = longest
         .iter()
         .filter(|&&(m, n)| m == max && n >= NO_RETURN_BEAMS)
@@ -616,6 +660,11 @@ mod tests {
             declared_laser_mount(text.as_bytes()),
             DeclaredMount::Varying
         );
+        // Laser poses 5 m from the robot's: two frames, not a mounting.
+        let far: String = (0..3)
+            .map(|k| robotlaser((0.0, 0.0, 0.0), (5.0, 0.0, 0.0), k as f64))
+            .collect();
+        assert_eq!(declared_laser_mount(far.as_bytes()), DeclaredMount::Varying);
         // FLASER declares none.
         let flaser = flaser(&["1.0", "2.0"], (1.0, 2.0, 0.3), 5.0);
         assert_eq!(declared_laser_mount(flaser.as_bytes()), DeclaredMount::None);
@@ -623,7 +672,7 @@ mod tests {
 
     #[test]
     fn a_repeated_longest_reading_is_the_logs_code_for_no_return() {
-        // Scans of a room whose open side reads 50.0, the log's code.
+        // Scans of a room whose open side reads `code`, the log's code.
         let scan = |code: &str, t: f64| {
             let mut ranges: Vec<String> = (0..20)
                 .map(|i| format!("{:.2}", 3.0 + 0.01 * i as f64))
@@ -632,14 +681,28 @@ mod tests {
             let ranges: Vec<&str> = ranges.iter().map(String::as_str).collect();
             flaser(&ranges, (0.0, 0.0, 0.0), t)
         };
-        let log: String = (0..6).map(|k| scan("50.0", k as f64)).collect();
-        assert_eq!(repeated_no_return(log.as_bytes()), Some(50.0));
+        let log = |code: &str, scans: usize| -> String {
+            (0..scans).map(|k| scan(code, k as f64)).collect()
+        };
+        assert_eq!(repeated_no_return(log("50.0", 6).as_bytes()), Some(50.0));
         // The SICK code is read as no return anyway: nothing to find.
-        let log: String = (0..6).map(|k| scan("81.91", k as f64)).collect();
-        assert_eq!(repeated_no_return(log.as_bytes()), None);
+        assert_eq!(repeated_no_return(log("81.91", 6).as_bytes()), None);
         // Too few scans repeat it: a far wall, not a code.
-        let log: String = (0..4).map(|k| scan("50.0", k as f64)).collect();
-        assert_eq!(repeated_no_return(log.as_bytes()), None);
+        assert_eq!(repeated_no_return(log("50.0", 4).as_bytes()), None);
+        // A log of the 8 m mode: all its special values are codes.
+        assert_eq!(repeated_no_return(log("8.191", 1).as_bytes()), Some(8.183));
+        // A wall square on, the farthest thing in view, read as one value
+        // by eight beams whose neighbours read it a centimetre nearer: no
+        // code.
+        let wall = |t: f64| {
+            let mut ranges: Vec<&str> = vec!["3.0"; 20];
+            ranges.extend(["11.99"]);
+            ranges.extend(["12.0"; 8]);
+            ranges.extend(["11.99", "3.0"]);
+            flaser(&ranges, (0.0, 0.0, 0.0), t)
+        };
+        let walls: String = (0..6).map(|k| wall(k as f64)).collect();
+        assert_eq!(repeated_no_return(walls.as_bytes()), None);
     }
 
     #[test]
