@@ -346,7 +346,7 @@ pub fn declared_laser_mount<R: BufRead>(mut reader: R) -> DeclaredMount {
 }
 
 /// Laser lines read for [`repeated_no_return`].
-const NO_RETURN_LINES: usize = 500;
+const NO_RETURN_LINES: usize = 2000;
 /// Beams of one scan that read a candidate exactly, in runs whose
 /// neighbours read none or read far nearer ...
 const NO_RETURN_BEAMS: usize = 5;
@@ -357,20 +357,19 @@ const NO_RETURN_SCANS: usize = 5;
 /// another (at a centimetre's resolution several may read one value).
 const NO_RETURN_STEP: f64 = 1.0;
 /// The LMS200's 8 m (mm) mode writes its special values (no echo,
-/// dazzled, out of range) as 8183–8191 mm: a log that never reads beyond
-/// them, and reads them, has them as its codes.
+/// dazzled, out of range) as 8183–8191 mm.
 const MM_MODE_CODES: [f64; 2] = [8.183, 8.191];
 
 /// The shortest range (m) a CARMEN log writes for a beam without an echo,
 /// where it writes one below the SICK cm-mode codes (81.9 m and up, always
 /// read as none), from its first [`NO_RETURN_LINES`] laser lines:
-/// - 8.183 m when none of them reads beyond 8.191 m and one reads in
-///   between: the 8 m mode's special values;
-/// - else their longest reading, when [`NO_RETURN_BEAMS`] beams of each of
-///   [`NO_RETURN_SCANS`] scans read exactly it, in runs whose neighbours
-///   read none or read more than [`NO_RETURN_STEP`] nearer. A code is read
-///   by every beam that meets nothing; a real surface that far by beams
-///   beside others that read it within its noise.
+/// their longest reading, when [`NO_RETURN_BEAMS`] beams of each of
+/// [`NO_RETURN_SCANS`] scans read exactly it, in runs whose neighbours read
+/// none or read more than [`NO_RETURN_STEP`] nearer. A code is read by
+/// every beam that meets nothing; a real surface that far by beams beside
+/// others that read it within its noise. Where that longest reading is one
+/// of the 8 m mode's special values, any of them counts, and all of them
+/// are codes: 8.183 m is returned.
 ///
 /// Lines that cannot be parsed are passed over.
 pub fn repeated_no_return<R: BufRead>(mut reader: R) -> Option<f64> {
@@ -412,14 +411,22 @@ pub fn repeated_no_return<R: BufRead>(mut reader: R) -> Option<f64> {
         longest.push((max, codes));
     }
     let max = longest.iter().map(|&(m, _)| m).reduce(f64::max)?;
-    if (MM_MODE_CODES[0]..=MM_MODE_CODES[1]).contains(&max) {
-        return Some(MM_MODE_CODES[0]);
-    }
+    let mm_mode = MM_MODE_CODES[0]..=MM_MODE_CODES[1];
+    // Scans whose longest reading, read as a code, is the log's longest
+    // (or, in the 8 m mode, any of its special values).
     let repeated = longest
         .iter()
-        .filter(|&&(m, n)| m == max && n >= NO_RETURN_BEAMS)
+        .filter(|&&(m, n)| {
+            n >= NO_RETURN_BEAMS && (m == max || (mm_mode.contains(&max) && mm_mode.contains(&m)))
+        })
         .count();
-    (repeated >= NO_RETURN_SCANS).then_some(max)
+    (repeated >= NO_RETURN_SCANS).then(|| {
+        if mm_mode.contains(&max) {
+            MM_MODE_CODES[0]
+        } else {
+            max
+        }
+    })
 }
 
 /// Streams the scans of a CARMEN log with the odometry pose at each scan.
@@ -690,7 +697,7 @@ mod tests {
         // Too few scans repeat it: a far wall, not a code.
         assert_eq!(repeated_no_return(log("50.0", 4).as_bytes()), None);
         // A log of the 8 m mode: all its special values are codes.
-        assert_eq!(repeated_no_return(log("8.191", 1).as_bytes()), Some(8.183));
+        assert_eq!(repeated_no_return(log("8.191", 6).as_bytes()), Some(8.183));
         // A wall square on, the farthest thing in view, read as one value
         // by eight beams whose neighbours read it a centimetre nearer: no
         // code.
@@ -703,6 +710,16 @@ mod tests {
         };
         let walls: String = (0..6).map(|k| wall(k as f64)).collect();
         assert_eq!(repeated_no_return(walls.as_bytes()), None);
+        // Nor is such a wall at 8.185 m, within the 8 m mode's band: a
+        // room's far wall must not cut the whole log's ranges there.
+        let near_band: String = (0..6)
+            .map(|k| {
+                wall(k as f64)
+                    .replace("12.0 ", "8.185 ")
+                    .replace("11.99", "8.18")
+            })
+            .collect();
+        assert_eq!(repeated_no_return(near_band.as_bytes()), None);
     }
 
     #[test]
