@@ -404,6 +404,27 @@ fn carmen_ranges(scan: &clsmap::geometry::RangeScan, no_return: f64) -> String {
     format!("{} {}", ranges.len(), ranges.join(" "))
 }
 
+/// `lp` as a CARMEN log of FLASER lines, `no_return` for a beam without
+/// an echo.
+fn flaser_log(lp: &MountedLoop, no_return: f64) -> String {
+    let mut text = String::new();
+    for (scan, o) in lp.scans.iter().zip(&lp.odometry) {
+        text += &format!(
+            "FLASER {} {} {} {} {} {} {} {} host {}\n",
+            carmen_ranges(scan, no_return),
+            o.x,
+            o.y,
+            o.theta,
+            o.x,
+            o.y,
+            o.theta,
+            scan.t,
+            scan.t,
+        );
+    }
+    text
+}
+
 /// Maps `input` offline with `config` into `out`; the summary and the
 /// trajectory written.
 fn map_into(
@@ -552,22 +573,7 @@ fn a_flaser_log_of_180_beams_is_read_one_degree_apart() {
     let lp = loop_scanned(Pose2::IDENTITY, spec);
     let out = tempfile::tempdir().unwrap();
     let input = out.path().join("flaser180.clf");
-    let mut text = String::new();
-    for (scan, o) in lp.scans.iter().zip(&lp.odometry) {
-        text += &format!(
-            "FLASER {} {} {} {} {} {} {} {} host {}\n",
-            carmen_ranges(scan, 81.91),
-            o.x,
-            o.y,
-            o.theta,
-            o.x,
-            o.y,
-            o.theta,
-            scan.t,
-            scan.t,
-        );
-    }
-    std::fs::write(&input, text).unwrap();
+    std::fs::write(&input, flaser_log(&lp, 81.91)).unwrap();
     let (_, tum) = map_into(&input, &out.path().join("map"), &MapperConfig::default());
     let e = evaluate(&tum, &lp.relations);
     show("FLASER, 180 beams", &e);
@@ -589,22 +595,7 @@ fn a_log_s_own_code_for_no_return_is_no_echo() {
     let out = tempfile::tempdir().unwrap();
     let map_with = |code: f64, detect: bool| {
         let input = out.path().join(format!("code{code}.clf"));
-        let mut text = String::new();
-        for (scan, o) in lp.scans.iter().zip(&lp.odometry) {
-            text += &format!(
-                "FLASER {} {} {} {} {} {} {} {} host {}\n",
-                carmen_ranges(scan, code),
-                o.x,
-                o.y,
-                o.theta,
-                o.x,
-                o.y,
-                o.theta,
-                scan.t,
-                scan.t,
-            );
-        }
-        std::fs::write(&input, text).unwrap();
+        std::fs::write(&input, flaser_log(&lp, code)).unwrap();
         let mut config = MapperConfig::default();
         if detect {
             let found = take_no_return_code(&mut config, &input).unwrap();

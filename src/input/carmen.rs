@@ -293,6 +293,27 @@ pub fn parse_line(line: &str) -> Result<Option<CarmenEntry>, MalformedLine> {
     Ok(Some(entry))
 }
 
+/// The laser lines of a CARMEN log that parse: each scan, with the laser's
+/// pose on the robot where the line declares it. Lines that cannot be
+/// parsed are passed over (the mapping names them); reading stops at the
+/// end or at a read error.
+fn laser_lines<R: BufRead>(mut reader: R) -> impl Iterator<Item = (RangeScan, Option<Pose2>)> {
+    let mut buf = Vec::new();
+    std::iter::from_fn(move || {
+        loop {
+            buf.clear();
+            if !matches!(reader.read_until(b'\n', &mut buf), Ok(n) if n > 0) {
+                return None;
+            }
+            if let Ok(Ok(Some(CarmenEntry::Laser { scan, mount, .. }))) =
+                std::str::from_utf8(&buf).map(parse_line)
+            {
+                return Some((scan, mount));
+            }
+        }
+    })
+}
+
 /// Laser lines read for [`declared_laser_mount`].
 const MOUNT_LINES: usize = 100;
 /// How far (m, rad) the mounts those lines declare may differ and still be
@@ -310,21 +331,9 @@ const MAX_MOUNT_OFFSET: f64 = 2.0;
 /// centre (a corrected laser pose beside raw odometry), are
 /// [`DeclaredMount::Varying`]. Lines that cannot be parsed are passed over
 /// here; the mapping names them.
-pub fn declared_laser_mount<R: BufRead>(mut reader: R) -> DeclaredMount {
+pub fn declared_laser_mount<R: BufRead>(reader: R) -> DeclaredMount {
     let mut first: Option<Pose2> = None;
-    let mut seen = 0;
-    let mut buf = Vec::new();
-    while seen < MOUNT_LINES {
-        buf.clear();
-        if !matches!(reader.read_until(b'\n', &mut buf), Ok(n) if n > 0) {
-            break;
-        }
-        let Ok(Ok(Some(CarmenEntry::Laser { mount, .. }))) =
-            std::str::from_utf8(&buf).map(parse_line)
-        else {
-            continue;
-        };
-        seen += 1;
+    for (_, mount) in laser_lines(reader).take(MOUNT_LINES) {
         match (mount, first) {
             (Some(m), None) => first = Some(m),
             (Some(m), Some(f)) => {
@@ -372,20 +381,10 @@ const MM_MODE_CODES: [f64; 2] = [8.183, 8.191];
 /// are codes: 8.183 m is returned.
 ///
 /// Lines that cannot be parsed are passed over.
-pub fn repeated_no_return<R: BufRead>(mut reader: R) -> Option<f64> {
+pub fn repeated_no_return<R: BufRead>(reader: R) -> Option<f64> {
     // Each scan's longest reading and how many beams read it as a code.
     let mut longest: Vec<(f64, usize)> = Vec::new();
-    let mut buf = Vec::new();
-    while longest.len() < NO_RETURN_LINES {
-        buf.clear();
-        if !matches!(reader.read_until(b'\n', &mut buf), Ok(n) if n > 0) {
-            break;
-        }
-        let Ok(Ok(Some(CarmenEntry::Laser { scan, .. }))) =
-            std::str::from_utf8(&buf).map(parse_line)
-        else {
-            continue;
-        };
+    for (scan, _) in laser_lines(reader).take(NO_RETURN_LINES) {
         let range = |i: usize| scan.ranges.get(i).and_then(|r| r.as_ref().ok().copied());
         let Some(max) = (0..scan.ranges.len()).filter_map(range).reduce(f64::max) else {
             continue;
