@@ -639,8 +639,9 @@ fn a_log_s_own_code_for_no_return_is_no_echo() {
 /// between (`base_footprint` → `sensor_plate` → `laser`).
 #[test]
 fn a_bag_is_mapped_with_the_laser_mount_its_tf_static_gives() {
+    use clsmap::daemon::ros2_out::planar_odometry;
     use clsmap::ros2::bag::{BagWriter, Durability};
-    use clsmap::ros2::msg::{PoseWithCovariance, TransformStamped};
+    use clsmap::ros2::msg::TransformStamped;
     use clsmap::ros2::{Header, LaserScan, Odometry, Quaternion, TfMessage, Time, Vector3};
     let plate = Pose2::new(-0.1, 0.05, 0.0);
     let on_plate = Pose2::new(-0.1, 0.0, 0.05);
@@ -681,20 +682,7 @@ fn a_bag_is_mapped_with_the_laser_mount_its_tf_static_gives() {
     };
     bag.write(&mut statics, ns(lp.scans[0].t), &tf).unwrap();
     for (scan, o) in lp.scans.iter().zip(&lp.odometry) {
-        let msg = Odometry {
-            header: header(scan.t, "odom"),
-            child_frame_id: "base_footprint".into(),
-            pose: PoseWithCovariance {
-                position: Vector3 {
-                    x: o.x,
-                    y: o.y,
-                    z: 0.0,
-                },
-                orientation: Quaternion::from_yaw(o.theta),
-                covariance: [0.0; 36],
-            },
-            ..Default::default()
-        };
+        let msg = planar_odometry(header(scan.t, "odom"), "base_footprint", o);
         bag.write(&mut odom, ns(scan.t), &msg).unwrap();
         let laser = clsmap::input::bag::laser_scan(scan, "laser", lp.spec.max_range, 0.0, 0.2);
         bag.write(&mut scans, ns(scan.t), &laser).unwrap();

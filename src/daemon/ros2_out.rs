@@ -199,6 +199,25 @@ pub struct Ros2Outbox {
 }
 
 /// A pose as a ROS transform of `child` in `parent` at `stamp`.
+/// `nav_msgs/Odometry` of `child` at the planar pose `p` in the header's
+/// frame, with no covariance or twist given.
+pub fn planar_odometry(header: Header, child: &str, p: &Pose2) -> Odometry {
+    Odometry {
+        header,
+        child_frame_id: child.into(),
+        pose: PoseWithCovariance {
+            position: Vector3 {
+                x: p.x,
+                y: p.y,
+                z: 0.0,
+            },
+            orientation: Quaternion::from_yaw(p.theta),
+            covariance: [0.0; 36],
+        },
+        twist: TwistWithCovariance::default(),
+    }
+}
+
 fn transform(stamp: Time, parent: &str, child: &str, p: &Pose2) -> TransformStamped {
     TransformStamped {
         header: Header {
@@ -374,20 +393,11 @@ impl Ros2Outbox {
         if let Some(o) = odometry {
             self.push(
                 t,
-                Ros2Message::Odometry(Box::new(Odometry {
-                    header: header(&odom_frame),
-                    child_frame_id: base_frame.clone(),
-                    pose: PoseWithCovariance {
-                        position: Vector3 {
-                            x: o.x,
-                            y: o.y,
-                            z: 0.0,
-                        },
-                        orientation: Quaternion::from_yaw(o.theta),
-                        covariance: [0.0; 36],
-                    },
-                    twist: TwistWithCovariance::default(),
-                })),
+                Ros2Message::Odometry(Box::new(planar_odometry(
+                    header(&odom_frame),
+                    &base_frame,
+                    &o,
+                ))),
             );
         }
     }
