@@ -92,6 +92,15 @@ pub fn map(
             summary.odometry_heading_drift
         );
     }
+    let learnt = if config.max_scan_lag > 0.0 {
+        "learnt from the localized scans"
+    } else {
+        "as configured"
+    };
+    println!(
+        "  odometry time offset:       {:+.2} s ({learnt})",
+        summary.odometry_time_offset
+    );
     println!(
         "  mean time per scan:         {:.1} µs (extraction {:.1}, localization {:.1}; per keyframe: segment map {:.1}, CLS map {:.1})",
         t.per_scan_us, t.extract_us, t.localize_us, t.map_update_us, t.cls_update_us

@@ -7,6 +7,7 @@
 //! laser_mount = { x = 0.0, y = 0.0, theta = 0.0 }
 //! max_correction_sigmas = inf
 //! odometry_time_offset = 0.0
+//! max_scan_lag = 0.3
 //! update_map_when_unlocalized = false
 //! [extraction]            # geometry::ExtractionConfig
 //! [localizer]             # localize::LocalizerConfig
@@ -78,7 +79,7 @@ pub struct OdometryNoise {
     /// reckoned on them. Default 0.1: over 30 seeds of the simulated
     /// worlds (2 % long odometry) the loop world's mean pose error went
     /// from 31 to 14 mm. CSAIL learns ×1.004 dense and ×1.015–1.019
-    /// thinned (its odometry lags the laser); its relation errors move by
+    /// thinned (its scans are stamped late against it); its relation errors move by
     /// a few millimetres, the sum over 28 thinned variants by +4 %.
     pub max_scale_correction: f64,
     /// Largest heading drift (rad/m) learnt from the scans localization
@@ -200,11 +201,23 @@ pub struct MapperConfig {
     /// `t + odometry_time_offset` from the odometry of the scans so far.
     /// Compensates a latency between the laser and odometry clocks; only
     /// offsets ≤ 0 can be honoured while streaming (a positive offset
-    /// holds the newest odometry). Default 0 (trust the log). Estimate it
+    /// holds the newest odometry). Default 0. Estimate it
     /// without ground truth by comparing the heading steps of localized
     /// scans with the odometry's at shifted times: on CSAIL they agree best
-    /// at −0.5 to −0.6 scan periods, about −0.1 s (see config/csail.toml).
+    /// at −0.5 to −0.6 scan periods, about −0.1 s. It is learnt so (see
+    /// `max_scan_lag`); this is the offset until then.
     pub odometry_time_offset: f64,
+    /// Longest lag (s) of the laser's time stamps behind the odometry's
+    /// learnt from the localized scans: the offset becomes the one in
+    /// `[−this, 0]` whose odometry heading steps fit those of consecutive
+    /// localized scans best, once they have turned 6 rad (see
+    /// `OdometryFeed::learning`); 0 keeps `odometry_time_offset` as set.
+    /// Default 0.3 s, a scan period and a half at the LMS200's slowest
+    /// line speed. CSAIL learns −0.12 s dense, −0.10 to −0.13 s thinned;
+    /// its 38 thinned logs driven forwards lost 23 % of their clipped
+    /// relation error, and driven backwards (odometry stamped late) learn
+    /// 0, as they must.
+    pub max_scan_lag: f64,
     /// Whether a keyframe whose localization failed for a reason other
     /// than too few matches (an inconsistent, non-converged or implausible
     /// fix) still updates the map at the predicted pose. Default false:
@@ -233,6 +246,7 @@ impl Default for MapperConfig {
             odometry: OdometryNoise::default(),
             max_correction_sigmas: f64::INFINITY,
             odometry_time_offset: 0.0,
+            max_scan_lag: 0.3,
             update_map_when_unlocalized: false,
             previous_scan_fallback: true,
             cls: ClsTuning::default(),
@@ -340,6 +354,7 @@ impl MapperConfig {
             self.odometry_time_offset,
             Finite,
         )?;
+        v.check("", "max_scan_lag", self.max_scan_lag, Within(0.0, 2.0))?;
         v.check("laser_mount", "x", self.laser_mount.x, Finite)?;
         v.check("laser_mount", "y", self.laser_mount.y, Finite)?;
         v.check("laser_mount", "theta", self.laser_mount.theta, Finite)?;

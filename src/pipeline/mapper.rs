@@ -126,7 +126,7 @@ impl Mapper {
             map: SegmentMap::new(config.map),
             cls: ClsMap::new(config.cls_map()),
             keyframes: KeyframePolicy::new(config.keyframes),
-            odometry: OdometryFeed::new(config.odometry_time_offset),
+            odometry: OdometryFeed::new(config.odometry_time_offset).learning(config.max_scan_lag),
             predictor: MotionPredictor::default(),
             previous_scan: SegmentIndex::new(),
             trajectory: Vec::new(),
@@ -346,6 +346,7 @@ impl Mapper {
         s.odometry_heading_scale = self.predictor.heading_scale(&self.config.odometry);
         s.odometry_scale = self.predictor.odometry_scale(&self.config.odometry);
         s.odometry_heading_drift = self.predictor.odometry_heading_drift(&self.config.odometry);
+        s.odometry_time_offset = self.odometry.offset();
         s.mean_time = self.clocks.means();
         s
     }
@@ -353,9 +354,9 @@ impl Mapper {
     /// Takes the parts of `config` that can change while mapping: line
     /// extraction, localization, keyframes, odometry noise and the
     /// correction gates. The laser mounting, the fusion gates, the CLS map
-    /// and the odometry time offset shape what is already in the map or in
-    /// flight; they are kept, and their names returned when `config` would
-    /// change them (they need a restart).
+    /// and the odometry time offset (and its learning) shape what is
+    /// already in the map or in flight; they are kept, and their names
+    /// returned when `config` would change them (they need a restart).
     pub fn retune(&mut self, config: MapperConfig) -> Vec<&'static str> {
         let mut kept = Vec::new();
         let old = self.config;
@@ -371,11 +372,15 @@ impl Mapper {
         if config.odometry_time_offset != old.odometry_time_offset {
             kept.push("odometry_time_offset");
         }
+        if config.max_scan_lag != old.max_scan_lag {
+            kept.push("max_scan_lag");
+        }
         self.config = MapperConfig {
             laser_mount: old.laser_mount,
             map: old.map,
             cls: old.cls,
             odometry_time_offset: old.odometry_time_offset,
+            max_scan_lag: old.max_scan_lag,
             ..config
         };
         self.keyframes.retune(config.keyframes);
@@ -850,6 +855,11 @@ impl Mapper {
             });
             match result {
                 Ok(fix) => {
+                    if matches!(reading, OdometryReading::Fresh(_)) {
+                        self.odometry.localized(record.scan.t, fix.pose.theta);
+                    } else {
+                        self.odometry.unlocalized();
+                    }
                     self.unlocalized_run = 0;
                     self.predictor.observe_heading(fix.pose.theta);
                     self.summary.heading_searches += usize::from(fix.heading_searched);
@@ -863,6 +873,7 @@ impl Mapper {
                     }
                 }
                 Err(e) => {
+                    self.odometry.unlocalized();
                     let kind = e.kind();
                     // Too few matches is new territory, or a view of
                     // too little to match (a bare wall up close), when it

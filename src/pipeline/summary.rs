@@ -165,6 +165,9 @@ pub struct MappingSummary {
     /// The heading drift added to the odometry's turns (rad/m; 0: taken
     /// as read; see `OdometryNoise::max_heading_drift`).
     pub odometry_heading_drift: f64,
+    /// The time offset (s) the odometry was read at by the end of the run:
+    /// learnt, or as configured (see `MapperConfig::max_scan_lag`).
+    pub odometry_time_offset: f64,
     /// Scans localized from a searched heading because nothing matched
     /// from the odometry's (see `LocalizerConfig::heading_search`).
     pub heading_searches: usize,
