@@ -502,30 +502,46 @@ fn loop_with_laser_at(mount: Pose2) -> MountedLoop {
     loop_scanned(mount, ScanSpec::lms200_half_degree(0.01))
 }
 
+/// The loop world driven `laps` times round its block, 0.1 m or 0.15 rad
+/// a step: the world, the true poses, the odometry (1 % long), and the
+/// generator left for the scans' noise.
+fn loop_driven(laps: usize, seed: u64) -> (World, Vec<Pose2>, Vec<Pose2>, Rng) {
+    let mut rng = Rng::new(seed);
+    let corners: [[f64; 2]; 5] = [[1.0, 1.0], [11.0, 1.0], [11.0, 9.0], [1.0, 9.0], [1.0, 1.0]];
+    let truth = tour(&corners, laps, 0.1);
+    let odometry = drifting_odometry(&truth, 1.01, 0.0, &mut rng);
+    (World::loop_around_block(), truth, odometry, rng)
+}
+
+/// Time (s) of step `k` of a drive: one scan every 0.2 s from 100 s.
+fn step_time(k: usize) -> f64 {
+    100.0 + 0.2 * k as f64
+}
+
+/// The true relation from step `i` to step `j` of a drive.
+fn step_relation(truth: &[Pose2], i: usize, j: usize) -> Relation {
+    Relation {
+        t1: step_time(i),
+        t2: step_time(j),
+        delta: truth[i].between(&truth[j]),
+    }
+}
+
 /// [`loop_with_laser_at`] with the scanner `spec`.
 fn loop_scanned(mount: Pose2, spec: ScanSpec) -> MountedLoop {
-    let world = World::loop_around_block();
-    let mut rng = Rng::new(11);
-    let corners: [[f64; 2]; 5] = [[1.0, 1.0], [11.0, 1.0], [11.0, 9.0], [1.0, 9.0], [1.0, 1.0]];
-    let truth = tour(&corners, 1, 0.1);
-    let odometry = drifting_odometry(&truth, 1.01, 0.0, &mut rng);
-    let time = |k: usize| 100.0 + 0.2 * k as f64;
+    let (world, truth, odometry, mut rng) = loop_driven(1, 11);
     let scans = truth
         .iter()
         .enumerate()
-        .map(|(k, t)| cast_scan(&world, &t.compose(&mount), &spec, time(k), &mut rng))
+        .map(|(k, t)| cast_scan(&world, &t.compose(&mount), &spec, step_time(k), &mut rng))
         .collect();
     let relations = (1..truth.len())
-        .map(|k| Relation {
-            t1: time(k - 1),
-            t2: time(k),
-            delta: truth[k - 1].between(&truth[k]),
-        })
-        .chain((0..truth.len()).step_by(10).map(|k| Relation {
-            t1: time(0),
-            t2: time(k),
-            delta: truth[0].between(&truth[k]),
-        }))
+        .map(|k| step_relation(&truth, k - 1, k))
+        .chain(
+            (0..truth.len())
+                .step_by(10)
+                .map(|k| step_relation(&truth, 0, k)),
+        )
         .collect();
     MountedLoop {
         scans,
@@ -634,18 +650,13 @@ fn a_flaser_log_of_180_beams_is_read_one_degree_apart() {
 /// `lead` scan periods ahead of each scan (negative: behind), as a log
 /// whose scans are stamped late, once their telegram has arrived, has it.
 fn loop_with_odometry_ahead(lead: isize, every: usize) -> MountedLoop {
-    let world = World::loop_around_block();
-    let mut rng = Rng::new(5);
-    let corners: [[f64; 2]; 5] = [[1.0, 1.0], [11.0, 1.0], [11.0, 9.0], [1.0, 9.0], [1.0, 1.0]];
-    let truth = tour(&corners, 2, 0.1);
-    let odometry = drifting_odometry(&truth, 1.01, 0.0, &mut rng);
-    let time = |k: usize| 100.0 + 0.2 * k as f64;
+    let (world, truth, odometry, mut rng) = loop_driven(2, 5);
     let spec = ScanSpec::lms200_half_degree(0.01);
     let last = truth.len() - 1;
     let kept: Vec<usize> = (0..truth.len()).step_by(every).collect();
     let scans = kept
         .iter()
-        .map(|&k| cast_scan(&world, &truth[k], &spec, time(k), &mut rng))
+        .map(|&k| cast_scan(&world, &truth[k], &spec, step_time(k), &mut rng))
         .collect();
     let odometry = kept
         .iter()
@@ -653,11 +664,7 @@ fn loop_with_odometry_ahead(lead: isize, every: usize) -> MountedLoop {
         .collect();
     let relations = kept
         .windows(2)
-        .map(|w| Relation {
-            t1: time(w[0]),
-            t2: time(w[1]),
-            delta: truth[w[0]].between(&truth[w[1]]),
-        })
+        .map(|w| step_relation(&truth, w[0], w[1]))
         .collect();
     MountedLoop {
         scans,

@@ -213,7 +213,7 @@ pub struct MapperConfig {
     /// localized scans best, once they have turned 6 rad (see
     /// `OdometryFeed::learning`); 0 keeps `odometry_time_offset` as set.
     /// Default 0.3 s, a scan period and a half at the LMS200's slowest
-    /// line speed. CSAIL learns −0.12 s dense, −0.10 to −0.13 s thinned;
+    /// line speed. CSAIL learns −0.12 s dense, −0.09 to −0.13 s thinned;
     /// its 38 thinned logs driven forwards lost 23 % of their clipped
     /// relation error, and driven backwards (odometry stamped late) learn
     /// 0, as they must.
