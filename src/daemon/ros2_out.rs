@@ -198,7 +198,6 @@ pub struct Ros2Outbox {
     had_odometry: bool,
 }
 
-/// A pose as a ROS transform of `child` in `parent` at `stamp`.
 /// `nav_msgs/Odometry` of `child` at the planar pose `p` in the header's
 /// frame, with no covariance or twist given.
 pub fn planar_odometry(header: Header, child: &str, p: &Pose2) -> Odometry {
@@ -218,6 +217,7 @@ pub fn planar_odometry(header: Header, child: &str, p: &Pose2) -> Odometry {
     }
 }
 
+/// A pose as a ROS transform of `child` in `parent` at `stamp`.
 fn transform(stamp: Time, parent: &str, child: &str, p: &Pose2) -> TransformStamped {
     TransformStamped {
         header: Header {

@@ -246,18 +246,12 @@ impl LagFit {
             return None;
         }
         let step = wrap_angle(theta - theta0);
-        let misses = (0..self.costs.len())
-            .map(|k| {
-                let lag = -(k as f64) * LAG_STEP;
-                let (a, b) = (track.at(t0 + lag)?, track.at(t + lag)?);
-                Some(
-                    wrap_angle(step - wrap_angle(b.theta - a.theta))
-                        .abs()
-                        .min(LAG_CLIP),
-                )
-            })
-            .collect::<Option<Vec<f64>>>()?;
-        for (cost, miss) in self.costs.iter_mut().zip(misses) {
+        // The track covers the pair's whole span, so every read is there.
+        let heading = |s: f64| track.at(s).map_or(0.0, |p| p.theta);
+        for (k, cost) in self.costs.iter_mut().enumerate() {
+            let lag = -(k as f64) * LAG_STEP;
+            let odometry_step = wrap_angle(heading(t + lag) - heading(t0 + lag));
+            let miss = wrap_angle(step - odometry_step).abs().min(LAG_CLIP);
             *cost += miss * miss;
         }
         self.turned += step.abs();
