@@ -2,11 +2,15 @@
 //! segments (target ≤ 30 µs, release), and against about 1,000 to show how
 //! the cost grows with the map (the BVH keeps it near-constant).
 //!
+//! Also one scan's points matched against the last scan's (point-to-line
+//! ICP, as `clsmap map` does for its smoothed trajectory).
+//!
 //! `cargo bench --bench localization -- --warm-up-time 1 --measurement-time 3`
 
 use std::hint::black_box;
 
 use clsmap::geometry::SegmentIndex;
+use clsmap::geometry::scan_match::{ScanPoints, align};
 use clsmap::geometry::{CogLine, ExtractionConfig, Pose2, extract_lines};
 use clsmap::localize::{LocalizerConfig, localize};
 use clsmap::sim::{Rng, ScanSpec, World, cast_scan};
@@ -99,5 +103,28 @@ fn bench_localization(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_localization);
+/// Two scans 0.2 m and 3° apart in the furnished room, matched from a
+/// start 3 cm and 1° off.
+fn bench_scan_match(c: &mut Criterion) {
+    let world = World::room_with_boxes();
+    let spec = ScanSpec::lms200_half_degree(0.01);
+    let mut rng = Rng::new(9);
+    let a = Pose2::new(4.0, 3.0, 0.3);
+    let b = Pose2::new(4.19, 3.06, 0.35);
+    let points = |p: &Pose2, rng: &mut Rng| {
+        ScanPoints::new(&cast_scan(&world, p, &spec, 0.0, rng), 0.05, 80.0)
+    };
+    let (pa, pb) = (points(&a, &mut rng), points(&b, &mut rng));
+    let truth = a.between(&b);
+    let start = truth.compose(&Pose2::new(0.03, -0.02, 0.017));
+    // Benchmark a case that works: the motion must come back within 5 mm.
+    let found = align(&pa, &pb, &start).expect("the scans match");
+    let e = truth.between(&found);
+    assert!(e.x.hypot(e.y) < 0.005, "{found:?} vs {truth:?}");
+    c.bench_function("scan_match/consecutive_scans", |bench| {
+        bench.iter(|| black_box(align(&pa, black_box(&pb), black_box(&start))))
+    });
+}
+
+criterion_group!(benches, bench_localization, bench_scan_match);
 criterion_main!(benches);

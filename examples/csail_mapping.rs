@@ -66,6 +66,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     let mut mapper = Mapper::new(config);
     // As `clsmap map` runs it: the CLS map built once, at the end.
     mapper.defer_cls_rebuild();
+    mapper.measure_scan_steps();
     let t0 = records.first().map_or(0.0, |r| r.scan.t);
     let mut prev: Option<(clsmap::geometry::Pose2, clsmap::geometry::Pose2)> = None;
     for r in &records {
@@ -108,23 +109,22 @@ fn main() -> Result<(), Box<dyn Error>> {
         "{:<22} {:>6} {:>4}  {:<21} {:<18}",
         "", "used", "miss", "translation", "rotation"
     );
+    // As `clsmap map` writes it.
+    let trajectory = mapper.smoothed_trajectory();
     row("odometry", &evaluate(&odometry, &relations));
-    row(
-        "line map (this)",
-        &evaluate(mapper.trajectory(), &relations),
-    );
+    row("line map (this)", &evaluate(&trajectory, &relations));
     let short: Vec<_> = relations
         .iter()
         .copied()
         .filter(|r| (r.t2 - r.t1).abs() < 5.0)
         .collect();
-    row("  relations < 5 s", &evaluate(mapper.trajectory(), &short));
+    row("  relations < 5 s", &evaluate(&trajectory, &short));
     let long: Vec<_> = relations
         .iter()
         .copied()
         .filter(|r| (r.t2 - r.t1).abs() >= 5.0)
         .collect();
-    row("  relations >= 5 s", &evaluate(mapper.trajectory(), &long));
+    row("  relations >= 5 s", &evaluate(&trajectory, &long));
     println!("{summary:#?}");
     if let Some(out) = out {
         clsmap::pipeline::write_outputs(&out, &mapper, false)?;

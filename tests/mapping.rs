@@ -93,6 +93,49 @@ fn csail_first_200_scans_beat_odometry_on_the_relations() {
     assert!(mapper.map().len() > 20);
 }
 
+/// Each scan's points matched against the last scan's steady the
+/// trajectory (`clsmap map` writes it so): on the first 600 scans of
+/// CSAIL, the smoothed trajectory's relations beat the localized one's,
+/// and no pose moves by more than a localization error.
+#[test]
+fn csail_s_trajectory_smoothed_by_scan_matching_beats_the_localized_one() {
+    let Some(dir) = csail_dir() else { return };
+    let (records, relations) = csail_head(&dir, 600);
+    let mut mapper = Mapper::new(MapperConfig::default());
+    mapper.measure_scan_steps();
+    for r in &records {
+        mapper.process(r);
+    }
+    mapper.settle();
+    let smoothed = mapper.smoothed_trajectory();
+    let before = evaluate(mapper.trajectory(), &relations);
+    let after = evaluate(&smoothed, &relations);
+    show("localized", &before);
+    show("smoothed", &after);
+    assert_eq!(after.used, before.used);
+    assert!(
+        after.translation_m.mean < 0.97 * before.translation_m.mean,
+        "{before:?} {after:?}"
+    );
+    assert!(
+        after.rotation_deg.mean < 0.95 * before.rotation_deg.mean,
+        "{before:?} {after:?}"
+    );
+    let moved = mapper
+        .trajectory()
+        .iter()
+        .zip(&smoothed)
+        .map(|((_, a), (_, b))| (a.x - b.x).hypot(a.y - b.y))
+        .fold(0.0, f64::max);
+    assert!(moved < 0.1, "{moved} m");
+    // Without the points matched there is nothing to smooth with.
+    let mut plain = Mapper::new(MapperConfig::default());
+    for r in &records[..100] {
+        plain.process(r);
+    }
+    assert_eq!(plain.smoothed_trajectory(), plain.trajectory());
+}
+
 /// The whole log (1988 scans, 374 m, 1172 relations) with the settings in
 /// `config/csail.toml`: the relation error must beat the published
 /// figure for scan matching on this log (Kümmerle et al. 2009: 0.106 m).

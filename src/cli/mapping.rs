@@ -102,8 +102,13 @@ pub fn map(
         summary.odometry_time_offset
     );
     println!(
-        "  mean time per scan:         {:.1} µs (extraction {:.1}, localization {:.1}; per keyframe: segment map {:.1}, CLS map {:.1})",
-        t.per_scan_us, t.extract_us, t.localize_us, t.map_update_us, t.cls_update_us
+        "  mean time per scan:         {:.1} µs (extraction {:.1}, localization {:.1}, scan matching {:.1}; per keyframe: segment map {:.1}, CLS map {:.1})",
+        t.per_scan_us,
+        t.extract_us,
+        t.localize_us,
+        t.scan_match_us,
+        t.map_update_us,
+        t.cls_update_us
     );
     let l = &summary.loops;
     println!(

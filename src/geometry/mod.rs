@@ -9,6 +9,7 @@ mod fit;
 mod points;
 pub mod pose;
 pub mod scan;
+pub mod scan_match;
 mod split;
 
 pub use cog_line::{CogLine, WallEnds};

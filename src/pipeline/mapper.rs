@@ -11,10 +11,12 @@ use super::jambs::JambTracks;
 use super::offline::SKIPPED_EXAMPLES;
 use super::prediction::{Estimate, MotionPredictor, OdometryFeed, OdometryReading};
 use super::rejection::{Rejection, RejectionKind};
+use super::smoothing;
 use super::start::{HINT_COVARIANCE, MapMode, StartSearch};
 use super::summary::{LastScanTimes, MappingSummary, StageClocks};
 use super::{MapSearch, PipelineError, ScanOutcome};
 use crate::files::trajectory::{AnchoredPose, StampedPose};
+use crate::geometry::scan_match::{self, ScanPoints};
 use crate::geometry::{CogLine, LineExtractor, Pose2, SegmentIndex, wrap_angle};
 use crate::graph::{
     AppliedOptimisation, Correction, KeyframeGraph, LoopSearchJob, LoopSearchResult,
@@ -58,7 +60,12 @@ pub struct Mapper {
     /// The previous scan's lines in the map frame, the fallback reference
     /// when the map offers too little to localize against.
     previous_scan: SegmentIndex,
+    /// The last scan's points, pose and time, for the step to the next.
+    last_points: Option<(ScanPoints, Pose2, f64)>,
     trajectory: Vec<StampedPose>,
+    /// Per trajectory entry, the motion from the entry before, measured by
+    /// matching the two scans' points (`None` where they were not).
+    steps: Vec<Option<Pose2>>,
     /// Per trajectory entry: the keyframe it was taken after and its pose
     /// in that keyframe's frame, so loop closures can move it with them.
     anchors: Vec<Option<(usize, Pose2)>>,
@@ -69,6 +76,9 @@ pub struct Mapper {
     /// [`Mapper::refresh_cls_map`] (offline runs, which need it
     /// only at the end), and whether one is waiting.
     defer_cls_rebuild: bool,
+    /// Whether each scan's points are matched against the last scan's
+    /// (see [`measure_scan_steps`](Self::measure_scan_steps)).
+    measure_steps: bool,
     cls_stale: bool,
     /// The kept keyframe the latest keyframe was merged into, if it was:
     /// the anchor of the scans after it until a keyframe is kept.
@@ -115,6 +125,12 @@ const RELOCALIZE_EVERY_SCANS: usize = 5;
 /// loaded map's explored free space, away from its boundary and from
 /// every map wall, is not taken: the robot is not where it is thought.
 const MAX_AGAINST_LOADED_MAP: f64 = 1.0;
+/// Consecutive scans farther apart than this in time (s), distance (m) or
+/// turn (rad) are not matched point to point: too little of one falls
+/// near the other's points.
+const MAX_MATCH_GAP: f64 = 1.0;
+const MAX_MATCH_STEP: f64 = 0.5;
+const MAX_MATCH_TURN: f64 = 0.35;
 
 impl Mapper {
     pub fn new(config: MapperConfig) -> Self {
@@ -129,10 +145,13 @@ impl Mapper {
             odometry: OdometryFeed::new(config.odometry_time_offset).learning(config.max_scan_lag),
             predictor: MotionPredictor::default(),
             previous_scan: SegmentIndex::new(),
+            last_points: None,
             trajectory: Vec::new(),
+            steps: Vec::new(),
             anchors: Vec::new(),
             graph: KeyframeGraph::new(),
             defer_cls_rebuild: false,
+            measure_steps: false,
             cls_stale: false,
             anchor_keyframe: None,
             previous_refused_jump: false,
@@ -250,6 +269,13 @@ impl Mapper {
                 [[a.x, a.y], [b.x, b.y]]
             })
             .collect()
+    }
+
+    /// Match each scan's points against the last scan's, for
+    /// [`smoothed_trajectory`](Self::smoothed_trajectory): for a run that
+    /// keeps its whole trajectory (an offline one), some 60 µs per scan.
+    pub fn measure_scan_steps(&mut self) {
+        self.measure_steps = true;
     }
 
     /// Grow the CLS map only when [`refresh_cls_map`](Self::refresh_cls_map)
@@ -429,10 +455,44 @@ impl Mapper {
         self.take_trajectory_before(settled)
     }
 
-    /// The first `end` poses (the two lists grow together, one entry per
+    /// The trajectory smoothed by the steps measured between consecutive
+    /// scans (see [`crate::pipeline::smoothing`]); the trajectory as
+    /// localized unless [`measure_scan_steps`](Self::measure_scan_steps)
+    /// was asked for.
+    pub fn smoothed_trajectory(&self) -> Vec<StampedPose> {
+        smoothing::smooth(&self.trajectory, &self.steps)
+    }
+
+    /// The motion from the last scan to this one at `pose`, from their
+    /// points, when the two are close enough in time and place for their
+    /// points to pair up; remembers this scan's points for the next.
+    fn match_last_scan(&mut self, record: &ScanRecord, pose: &Pose2) -> Option<Pose2> {
+        if !self.measure_steps {
+            return None;
+        }
+        let range = &self.config.extraction;
+        let points = ScanPoints::new(&record.scan, range.min_range, range.max_range);
+        let last = self.last_points.replace((points, *pose, record.scan.t))?;
+        let (reference, last_pose, last_t) = last;
+        let moved = last_pose.between(pose);
+        let near = record.scan.t - last_t <= MAX_MATCH_GAP
+            && moved.x.hypot(moved.y) <= MAX_MATCH_STEP
+            && moved.theta.abs() <= MAX_MATCH_TURN;
+        if !near {
+            return None;
+        }
+        let mount = self.config.laser_mount;
+        let start = mount.inverse().compose(&moved).compose(&mount);
+        let current = &self.last_points.as_ref()?.0;
+        let found = scan_match::align(&reference, current, &start)?;
+        Some(mount.compose(&found).compose(&mount.inverse()))
+    }
+
+    /// The first `end` poses (the lists grow together, one entry per
     /// scan).
     fn take_trajectory_before(&mut self, end: usize) -> Vec<AnchoredPose> {
         let end = end.min(self.trajectory.len()).min(self.anchors.len());
+        self.steps.drain(..end.min(self.steps.len()));
         self.trajectory
             .drain(..end)
             .zip(self.anchors.drain(..end))
@@ -1074,6 +1134,13 @@ impl Mapper {
             }
         }
         self.trajectory.push((record.scan.t, outcome.pose));
+        let t = Instant::now();
+        let step =
+            trace_span!("scan_match").in_scope(|| self.match_last_scan(record, &outcome.pose));
+        if self.measure_steps {
+            self.clocks.scan_match.add(t.elapsed());
+        }
+        self.steps.push(step);
         // Before a resumed session's first keyframe, the last keyframe is
         // the old session's, anywhere in the map: no anchor.
         let anchor = if self.first_session_keyframe {

@@ -44,6 +44,7 @@ pub mod offline;
 pub mod output;
 pub mod prediction;
 pub mod rejection;
+pub mod smoothing;
 pub mod start;
 pub mod summary;
 

@@ -77,6 +77,7 @@ pub fn run_offline_mapping(
     };
     let mut log = open_log_with(input, log.unwrap_or(&LogOptions::default()))?;
     mapper.defer_cls_rebuild();
+    mapper.measure_scan_steps();
     let mut input_broken = None;
     let (mut skipped, mut examples) = (0, Vec::new());
     while let Some(record) = log.next() {

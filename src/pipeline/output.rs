@@ -34,10 +34,11 @@ pub fn write_outputs(
     draw_loops: bool,
 ) -> Result<(), PipelineError> {
     create_output_dir(out_dir)?;
+    let trajectory = mapper.smoothed_trajectory();
     let mut tum = Vec::new();
-    write_tum(&mut tum, mapper.trajectory())?;
+    write_tum(&mut tum, &trajectory)?;
     write_file(&out_dir.join(TRAJECTORY_FILE), &tum)?;
-    let poses: Vec<Pose2> = mapper.trajectory().iter().map(|(_, p)| *p).collect();
+    let poses: Vec<Pose2> = trajectory.iter().map(|(_, p)| *p).collect();
     let loops = if draw_loops {
         mapper.loop_edges()
     } else {

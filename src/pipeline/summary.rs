@@ -41,6 +41,8 @@ pub(super) struct StageClocks {
     pub localize: StageClock,
     pub map_update: StageClock,
     pub cls_update: StageClock,
+    /// Matching the scan's points against the last scan's.
+    pub scan_match: StageClock,
     /// The whole of `process`.
     pub whole: StageClock,
 }
@@ -54,6 +56,7 @@ impl StageClocks {
             &mut self.localize,
             &mut self.map_update,
             &mut self.cls_update,
+            &mut self.scan_match,
             &mut self.whole,
         ] {
             clock.last = None;
@@ -68,6 +71,7 @@ impl StageClocks {
             localize_us: self.localize.mean_us(),
             map_update_us: self.map_update.mean_us(),
             cls_update_us: self.cls_update.mean_us(),
+            scan_match_us: self.scan_match.mean_us(),
             per_scan_us: self.whole.mean_us(),
         }
     }
@@ -98,6 +102,9 @@ pub struct StageTimes {
     pub map_update_us: f64,
     /// CLS map update (local map, region union, fusion), per keyframe.
     pub cls_update_us: f64,
+    /// Matching a scan's points against the last scan's, per scan matched
+    /// (an offline run's; 0 when none was).
+    pub scan_match_us: f64,
     /// Whole pipeline, per scan.
     pub per_scan_us: f64,
 }

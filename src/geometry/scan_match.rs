@@ -1,0 +1,338 @@
+//! Point-to-line ICP between two consecutive scans: how far the robot
+//! moved between them, from the raw points.
+//!
+//! Localization places each scan against the map's lines, a couple of
+//! centimetres from where it is; the raw points of two scans a fraction of
+//! a second apart pin their relative pose to millimetres. Both together
+//! (see [`crate::pipeline::smoothing`]) give a trajectory steady from scan
+//! to scan and tied to the map.
+//!
+//! Points stay in the sensor frame, where a point's bearing names the beam
+//! it fell near in the other scan (projective association: no search
+//! structure, a handful of beams looked at per point).
+
+use nalgebra::{Matrix3, Vector3};
+
+use super::pose::Pose2;
+use super::scan::RangeScan;
+
+/// Beams either side of a point's own that give its surface's normal.
+const NORMAL_BEAMS: usize = 3;
+/// Neighbours farther than this (m) belong to another surface.
+const NORMAL_REACH: f64 = 0.2;
+/// Least points (with the point itself) for a normal.
+const NORMAL_POINTS: usize = 4;
+/// Greatest ratio of the spread across the surface to the spread along
+/// it: rounder patches (corners, clutter) have no normal.
+const NORMAL_FLATNESS: f64 = 0.05;
+/// Beams either side of the projected one searched for a partner, and
+/// either side of the last partner once there is one.
+const SEARCH_BEAMS: i64 = 4;
+const NEAR_BEAMS: i64 = 1;
+/// Iterations, and the partner distance (m) allowed in each stage: wide
+/// first while the start may be centimetres off, then narrow.
+const ITERATIONS: usize = 7;
+fn gate(iteration: usize) -> f64 {
+    if iteration < 3 { 0.15 } else { 0.08 }
+}
+/// Share of the pairs kept each iteration, the closest ones.
+const KEPT: f64 = 0.85;
+/// Least pairs for a result.
+const MIN_PAIRS: usize = 30;
+/// Least information across the weakest direction of translation (the
+/// smallest eigenvalue of Σ n·nᵀ over the kept pairs, in pairs' worth of
+/// normals): a corridor's two walls give none along it.
+const MIN_TRANSLATION_INFO: f64 = 20.0;
+/// A result farther than this from the start (m, rad) is a different
+/// alignment, not a refinement.
+const MAX_CHANGE: f64 = 0.2;
+const MAX_TURN: f64 = 0.1;
+
+/// One scan's valid points (sensor frame) with their surface normals, by
+/// beam.
+#[derive(Debug, Clone, Default)]
+pub struct ScanPoints {
+    angle_increment: f64,
+    /// Per beam, its point, if the beam returned within the range limits.
+    points: Vec<Option<[f64; 2]>>,
+    /// Per beam, its point and the unit normal of the surface there, if
+    /// the surface is flat.
+    surfaces: Vec<Option<([f64; 2], [f64; 2])>>,
+}
+
+impl ScanPoints {
+    /// The points of `scan` whose ranges lie within `[min_range,
+    /// max_range]` (m).
+    pub fn new(scan: &RangeScan, min_range: f64, max_range: f64) -> ScanPoints {
+        // Beam directions by turning the first one beam by beam (one
+        // sin_cos for the scan instead of one per beam).
+        let (s0, c0) = scan.angle_min.sin_cos();
+        let (si, ci) = scan.angle_increment.sin_cos();
+        let mut direction = [c0, s0];
+        let points: Vec<Option<[f64; 2]>> = scan
+            .ranges
+            .iter()
+            .map(|r| {
+                let [c, s] = direction;
+                direction = [c * ci - s * si, s * ci + c * si];
+                let r = *r.as_ref().ok()?;
+                (r.is_finite() && r >= min_range && r <= max_range).then_some([r * c, r * s])
+            })
+            .collect();
+        let surfaces = (0..points.len())
+            .map(|i| Some((points[i]?, normal(&points, i)?)))
+            .collect();
+        ScanPoints {
+            angle_increment: scan.angle_increment,
+            points,
+            surfaces,
+        }
+    }
+
+    /// The beam of this scan nearest the bearing of `p`, the point `m` of
+    /// beam `i` of a scan with the same beams, moved: beam `i` turned by
+    /// the small angle between `m` and `p` (its tangent, to spare an
+    /// arc tangent per point).
+    fn beam_near(&self, i: usize, m: &[f64; 2], p: [f64; 2]) -> Option<i64> {
+        let dot = m[0] * p[0] + m[1] * p[1];
+        if dot <= 0.0 || self.angle_increment == 0.0 || !self.angle_increment.is_finite() {
+            return None;
+        }
+        let turn = (m[0] * p[1] - m[1] * p[0]) / dot;
+        let shift = (turn / self.angle_increment).round();
+        (shift.abs() < 1e6).then(|| i as i64 + shift as i64)
+    }
+
+    /// The beam whose point (with a normal) lies nearest `p` within
+    /// `reach` (m), among the `around` beams either side of `beam`.
+    fn partner(&self, p: [f64; 2], beam: i64, around: i64, reach: f64) -> Option<usize> {
+        let mut best = None;
+        let mut best_d2 = reach * reach;
+        for j in (beam - around)..=(beam + around) {
+            let Ok(j) = usize::try_from(j) else { continue };
+            let Some(Some((q, _))) = self.surfaces.get(j) else {
+                continue;
+            };
+            let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
+            if d2 < best_d2 {
+                best_d2 = d2;
+                best = Some(j);
+            }
+        }
+        best
+    }
+}
+
+/// The normal at beam `i`'s point from the points of the beams around it
+/// on the same surface (principal axes of their scatter).
+fn normal(points: &[Option<[f64; 2]>], i: usize) -> Option<[f64; 2]> {
+    let p = points[i]?;
+    let lo = i.saturating_sub(NORMAL_BEAMS);
+    let hi = (i + NORMAL_BEAMS + 1).min(points.len());
+    let mut near = [[0.0; 2]; 2 * NORMAL_BEAMS + 1];
+    let mut n = 0;
+    for q in points[lo..hi].iter().flatten() {
+        // Relative to the point itself, which keeps the sums small.
+        let d = [q[0] - p[0], q[1] - p[1]];
+        if d[0] * d[0] + d[1] * d[1] < NORMAL_REACH * NORMAL_REACH {
+            near[n] = d;
+            n += 1;
+        }
+    }
+    if n < NORMAL_POINTS {
+        return None;
+    }
+    let near = &near[..n];
+    let (sx, sy) = near
+        .iter()
+        .fold((0.0, 0.0), |(x, y), q| (x + q[0], y + q[1]));
+    let (mx, my) = (sx / n as f64, sy / n as f64);
+    let (xx, yy, xy) = near.iter().fold((0.0, 0.0, 0.0), |(a, b, c), q| {
+        let (dx, dy) = (q[0] - mx, q[1] - my);
+        (a + dx * dx, b + dy * dy, c + dx * dy)
+    });
+    let half = 0.5 * (xx + yy);
+    let root = (0.25 * (xx - yy).powi(2) + xy * xy).sqrt();
+    let (along, across) = (half + root, half - root);
+    if along <= 0.0 || across > NORMAL_FLATNESS * along {
+        return None;
+    }
+    // The scatter's eigenvector of the smaller eigenvalue, from whichever
+    // row of (S − across·I) is the longer.
+    let a = [xy, across - xx];
+    let b = [across - yy, xy];
+    let norm2 = |v: [f64; 2]| v[0] * v[0] + v[1] * v[1];
+    let v = if norm2(a) >= norm2(b) { a } else { b };
+    let length = norm2(v).sqrt();
+    (length > 0.0).then(|| [v[0] / length, v[1] / length])
+}
+
+/// The pose of `moving`'s sensor in `reference`'s sensor frame, refined
+/// from `start` by point-to-line ICP; `None` when too few points pair up,
+/// when a direction of translation is left unconstrained (a corridor's
+/// length), or when the result strays from `start` by more than a
+/// refinement would.
+pub fn align(reference: &ScanPoints, moving: &ScanPoints, start: &Pose2) -> Option<Pose2> {
+    let mut pose = *start;
+    let mut rows: Vec<([f64; 3], f64)> = Vec::with_capacity(moving.points.len());
+    // Per moving point, the reference beam it paired with last: later
+    // iterations look only beside it (the pose moves by millimetres).
+    let mut paired: Vec<Option<i64>> = vec![None; moving.points.len()];
+    let mut info = Matrix3::zeros();
+    for iteration in 0..ITERATIONS {
+        let reach = gate(iteration);
+        let (s, c) = pose.theta.sin_cos();
+        rows.clear();
+        for (i, (m, last)) in moving.points.iter().zip(paired.iter_mut()).enumerate() {
+            let Some(m) = m else { continue };
+            let p = [pose.x + c * m[0] - s * m[1], pose.y + s * m[0] + c * m[1]];
+            let (beam, around) = match *last {
+                Some(j) if iteration > 0 => (j, NEAR_BEAMS),
+                _ => match reference.beam_near(i, m, p) {
+                    Some(k) => (k, SEARCH_BEAMS),
+                    None => continue,
+                },
+            };
+            let found = reference.partner(p, beam, around, reach);
+            *last = found.and_then(|j| i64::try_from(j).ok());
+            let Some(j) = found else { continue };
+            let Some((q, n)) = reference.surfaces[j] else {
+                continue;
+            };
+            let e = n[0] * (p[0] - q[0]) + n[1] * (p[1] - q[1]);
+            let turn = n[0] * (-s * m[0] - c * m[1]) + n[1] * (c * m[0] - s * m[1]);
+            rows.push(([n[0], n[1], turn], e));
+        }
+        if rows.len() < MIN_PAIRS {
+            return None;
+        }
+        let keep = ((KEPT * rows.len() as f64) as usize).max(MIN_PAIRS);
+        if keep < rows.len() {
+            rows.select_nth_unstable_by(keep, |a, b| a.1.abs().total_cmp(&b.1.abs()));
+            rows.truncate(keep);
+        }
+        info = Matrix3::zeros();
+        let mut g = Vector3::zeros();
+        for (j, e) in &rows {
+            let j = Vector3::from(*j);
+            info += j * j.transpose();
+            g += j * *e;
+        }
+        let step = info.cholesky()?.solve(&(-g));
+        pose = Pose2::new(pose.x + step[0], pose.y + step[1], pose.theta + step[2]);
+        if iteration >= 3 && step[0].hypot(step[1]) < 1e-4 && step[2].abs() < 1e-5 {
+            break;
+        }
+    }
+    let (a, b, d) = (info[(0, 0)], info[(0, 1)], info[(1, 1)]);
+    let weakest = 0.5 * (a + d) - (0.25 * (a - d).powi(2) + b * b).sqrt();
+    let change = start.between(&pose);
+    let fits = weakest >= MIN_TRANSLATION_INFO
+        && change.x.hypot(change.y) <= MAX_CHANGE
+        && change.theta.abs() <= MAX_TURN;
+    fits.then_some(pose)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::geometry::BeamFault;
+
+    /// A scan from `pose` in a 6 m × 4 m room, (0, 0)–(6, 4), with a box
+    /// (2, 3)–(2.5, 3.5) and 5 mm of range noise (deterministic).
+    fn room_scan(pose: &Pose2) -> RangeScan {
+        let walls = [
+            ([0.0, 0.0], [6.0, 0.0]),
+            ([6.0, 0.0], [6.0, 4.0]),
+            ([6.0, 4.0], [0.0, 4.0]),
+            ([0.0, 4.0], [0.0, 0.0]),
+            ([2.0, 3.0], [2.5, 3.0]),
+            ([2.5, 3.0], [2.5, 3.5]),
+        ];
+        let n = 361;
+        let inc = std::f64::consts::PI / 360.0;
+        let ranges = (0..n)
+            .map(|i| {
+                let a = pose.theta - std::f64::consts::FRAC_PI_2 + i as f64 * inc;
+                let d = [a.cos(), a.sin()];
+                let hit = walls
+                    .iter()
+                    .filter_map(|(p, q)| {
+                        let e = [q[0] - p[0], q[1] - p[1]];
+                        let den = d[0] * e[1] - d[1] * e[0];
+                        if den.abs() < 1e-12 {
+                            return None;
+                        }
+                        let w = [p[0] - pose.x, p[1] - pose.y];
+                        let t = (w[0] * e[1] - w[1] * e[0]) / den;
+                        let u = (w[0] * d[1] - w[1] * d[0]) / den;
+                        (t > 0.0 && (0.0..=1.0).contains(&u)).then_some(t)
+                    })
+                    .min_by(f64::total_cmp);
+                let noise = 0.005 * ((i * 7919 % 101) as f64 / 50.0 - 1.0);
+                hit.map(|r| r + noise).ok_or(BeamFault::NoReturn)
+            })
+            .collect();
+        RangeScan {
+            t: 0.0,
+            angle_min: -std::f64::consts::FRAC_PI_2,
+            angle_increment: inc,
+            ranges,
+        }
+    }
+
+    fn points(pose: &Pose2) -> ScanPoints {
+        ScanPoints::new(&room_scan(pose), 0.05, 80.0)
+    }
+
+    #[test]
+    fn recovers_the_motion_between_two_scans_from_a_start_centimetres_off() {
+        let a = Pose2::new(1.5, 1.5, 0.2);
+        let b = Pose2::new(1.8, 1.62, 0.27);
+        let truth = a.between(&b);
+        let start = truth.compose(&Pose2::new(0.04, -0.03, 0.02));
+        let found = align(&points(&a), &points(&b), &start).unwrap();
+        let error = truth.between(&found);
+        assert!(error.x.hypot(error.y) < 0.003, "{error:?}");
+        assert!(error.theta.abs() < 0.002, "{error:?}");
+    }
+
+    #[test]
+    fn a_corridor_s_length_is_left_open() {
+        // Two parallel walls only, 2 m apart, far ends out of reach: the
+        // same scan from anywhere along it.
+        let corridor = || RangeScan {
+            t: 0.0,
+            angle_min: -std::f64::consts::FRAC_PI_2,
+            angle_increment: std::f64::consts::PI / 360.0,
+            ranges: (0..361)
+                .map(|i| {
+                    let a = -std::f64::consts::FRAC_PI_2 + i as f64 * std::f64::consts::PI / 360.0;
+                    let r = 1.0 / a.sin().abs();
+                    if r < 7.0 {
+                        Ok(r)
+                    } else {
+                        Err(BeamFault::NoReturn)
+                    }
+                })
+                .collect(),
+        };
+        let a = ScanPoints::new(&corridor(), 0.05, 80.0);
+        let b = ScanPoints::new(&corridor(), 0.05, 80.0);
+        assert!(align(&a, &b, &Pose2::new(0.3, 0.0, 0.0)).is_none());
+    }
+
+    #[test]
+    fn too_few_points_give_nothing() {
+        let empty = ScanPoints::default();
+        assert!(
+            align(
+                &empty,
+                &points(&Pose2::new(1.0, 1.0, 0.0)),
+                &Pose2::IDENTITY
+            )
+            .is_none()
+        );
+    }
+}
