@@ -18,8 +18,9 @@ use super::scan::RangeScan;
 
 /// Beams either side of a point's own that give its surface's normal.
 const NORMAL_BEAMS: usize = 3;
-/// Neighbours farther than this (m) belong to another surface.
-const NORMAL_REACH: f64 = 0.2;
+/// Neighbours farther than this (m) belong to another surface: ±3 beams
+/// of 1° at 5 m span 0.26 m.
+const NORMAL_REACH: f64 = 0.3;
 /// Least points (with the point itself) for a normal.
 const NORMAL_POINTS: usize = 4;
 /// Greatest ratio of the spread across the surface to the spread along
@@ -38,11 +39,13 @@ fn gate(iteration: usize) -> f64 {
 /// Share of the pairs kept each iteration, the closest ones.
 const KEPT: f64 = 0.85;
 /// Least pairs for a result.
-const MIN_PAIRS: usize = 30;
+const MIN_PAIRS: usize = 15;
 /// Least information across the weakest direction of translation (the
 /// smallest eigenvalue of Σ n·nᵀ over the kept pairs, in pairs' worth of
-/// normals): a corridor's two walls give none along it.
-const MIN_TRANSLATION_INFO: f64 = 20.0;
+/// normals): a corridor's two walls give none along it. Low enough for
+/// 1° scans' 181 beams (at 30 pairs and 20, CSAIL decimated to 1° beams
+/// gained nothing from the smoothing; at 15 and 10, 0.0337 → 0.0326 m).
+const MIN_TRANSLATION_INFO: f64 = 10.0;
 /// A result farther than this from the start (m, rad) is a different
 /// alignment, not a refinement.
 const MAX_CHANGE: f64 = 0.2;
