@@ -240,62 +240,22 @@ pub fn align(reference: &ScanPoints, moving: &ScanPoints, start: &Pose2) -> Opti
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-    use crate::geometry::BeamFault;
+    use crate::sim::{Rng, ScanSpec, World, cast_scan};
 
-    /// A scan from `pose` in a 6 m × 4 m room, (0, 0)–(6, 4), with a box
-    /// (2, 3)–(2.5, 3.5) and 5 mm of range noise (deterministic).
-    fn room_scan(pose: &Pose2) -> RangeScan {
-        let walls = [
-            ([0.0, 0.0], [6.0, 0.0]),
-            ([6.0, 0.0], [6.0, 4.0]),
-            ([6.0, 4.0], [0.0, 4.0]),
-            ([0.0, 4.0], [0.0, 0.0]),
-            ([2.0, 3.0], [2.5, 3.0]),
-            ([2.5, 3.0], [2.5, 3.5]),
-        ];
-        let n = 361;
-        let inc = std::f64::consts::PI / 360.0;
-        let ranges = (0..n)
-            .map(|i| {
-                let a = pose.theta - std::f64::consts::FRAC_PI_2 + i as f64 * inc;
-                let d = [a.cos(), a.sin()];
-                let hit = walls
-                    .iter()
-                    .filter_map(|(p, q)| {
-                        let e = [q[0] - p[0], q[1] - p[1]];
-                        let den = d[0] * e[1] - d[1] * e[0];
-                        if den.abs() < 1e-12 {
-                            return None;
-                        }
-                        let w = [p[0] - pose.x, p[1] - pose.y];
-                        let t = (w[0] * e[1] - w[1] * e[0]) / den;
-                        let u = (w[0] * d[1] - w[1] * d[0]) / den;
-                        (t > 0.0 && (0.0..=1.0).contains(&u)).then_some(t)
-                    })
-                    .min_by(f64::total_cmp);
-                let noise = 0.005 * ((i * 7919 % 101) as f64 / 50.0 - 1.0);
-                hit.map(|r| r + noise).ok_or(BeamFault::NoReturn)
-            })
-            .collect();
-        RangeScan {
-            t: 0.0,
-            angle_min: -std::f64::consts::FRAC_PI_2,
-            angle_increment: inc,
-            ranges,
-        }
-    }
-
-    fn points(pose: &Pose2) -> ScanPoints {
-        ScanPoints::new(&room_scan(pose), 0.05, 80.0)
+    fn points(world: &World, pose: &Pose2, seed: u64) -> ScanPoints {
+        let spec = ScanSpec::lms200_half_degree(0.005);
+        let scan = cast_scan(world, pose, &spec, 0.0, &mut Rng::new(seed));
+        ScanPoints::new(&scan, 0.05, 80.0)
     }
 
     #[test]
     fn recovers_the_motion_between_two_scans_from_a_start_centimetres_off() {
-        let a = Pose2::new(1.5, 1.5, 0.2);
-        let b = Pose2::new(1.8, 1.62, 0.27);
+        let room = World::room_with_boxes();
+        let a = Pose2::new(4.0, 3.0, 0.2);
+        let b = Pose2::new(4.3, 3.12, 0.27);
         let truth = a.between(&b);
         let start = truth.compose(&Pose2::new(0.04, -0.03, 0.02));
-        let found = align(&points(&a), &points(&b), &start).unwrap();
+        let found = align(&points(&room, &a, 1), &points(&room, &b, 2), &start).unwrap();
         let error = truth.between(&found);
         assert!(error.x.hypot(error.y) < 0.003, "{error:?}");
         assert!(error.theta.abs() < 0.002, "{error:?}");
@@ -303,39 +263,18 @@ mod tests {
 
     #[test]
     fn a_corridor_s_length_is_left_open() {
-        // Two parallel walls only, 2 m apart, far ends out of reach: the
-        // same scan from anywhere along it.
-        let corridor = || RangeScan {
-            t: 0.0,
-            angle_min: -std::f64::consts::FRAC_PI_2,
-            angle_increment: std::f64::consts::PI / 360.0,
-            ranges: (0..361)
-                .map(|i| {
-                    let a = -std::f64::consts::FRAC_PI_2 + i as f64 * std::f64::consts::PI / 360.0;
-                    let r = 1.0 / a.sin().abs();
-                    if r < 7.0 {
-                        Ok(r)
-                    } else {
-                        Err(BeamFault::NoReturn)
-                    }
-                })
-                .collect(),
-        };
-        let a = ScanPoints::new(&corridor(), 0.05, 80.0);
-        let b = ScanPoints::new(&corridor(), 0.05, 80.0);
+        // Two plain walls 2 m apart, the ends out of reach: the scans from
+        // 0.3 m apart along it look the same.
+        let corridor = World::corridor(40.0, 2.0, None);
+        let a = points(&corridor, &Pose2::new(15.0, 0.0, 0.0), 1);
+        let b = points(&corridor, &Pose2::new(15.3, 0.0, 0.0), 2);
         assert!(align(&a, &b, &Pose2::new(0.3, 0.0, 0.0)).is_none());
     }
 
     #[test]
     fn too_few_points_give_nothing() {
-        let empty = ScanPoints::default();
-        assert!(
-            align(
-                &empty,
-                &points(&Pose2::new(1.0, 1.0, 0.0)),
-                &Pose2::IDENTITY
-            )
-            .is_none()
-        );
+        let room = World::room_with_boxes();
+        let b = points(&room, &Pose2::new(4.0, 3.0, 0.0), 1);
+        assert!(align(&ScanPoints::default(), &b, &Pose2::IDENTITY).is_none());
     }
 }

@@ -467,9 +467,6 @@ impl Mapper {
     /// points, when the two are close enough in time and place for their
     /// points to pair up; remembers this scan's points for the next.
     fn match_last_scan(&mut self, record: &ScanRecord, pose: &Pose2) -> Option<Pose2> {
-        if !self.measure_steps {
-            return None;
-        }
         let range = &self.config.extraction;
         let points = ScanPoints::new(&record.scan, range.min_range, range.max_range);
         let last = self.last_points.replace((points, *pose, record.scan.t))?;
@@ -1134,12 +1131,15 @@ impl Mapper {
             }
         }
         self.trajectory.push((record.scan.t, outcome.pose));
-        let t = Instant::now();
-        let step =
-            trace_span!("scan_match").in_scope(|| self.match_last_scan(record, &outcome.pose));
-        if self.measure_steps {
+        let step = if self.measure_steps {
+            let t = Instant::now();
+            let step =
+                trace_span!("scan_match").in_scope(|| self.match_last_scan(record, &outcome.pose));
             self.clocks.scan_match.add(t.elapsed());
-        }
+            step
+        } else {
+            None
+        };
         self.steps.push(step);
         // Before a resumed session's first keyframe, the last keyframe is
         // the old session's, anywhere in the map: no anchor.
