@@ -119,7 +119,7 @@ fn bench_scan_match(c: &mut Criterion) {
     let start = truth.compose(&Pose2::new(0.03, -0.02, 0.017));
     // Benchmark a case that works: the motion must come back within 5 mm.
     let found = align(&pa, &pb, &start).expect("the scans match");
-    let e = truth.between(&found);
+    let e = truth.between(&found.pose);
     assert!(e.x.hypot(e.y) < 0.005, "{found:?} vs {truth:?}");
     c.bench_function("scan_match/consecutive_scans", |bench| {
         bench.iter(|| black_box(align(&pa, black_box(&pb), black_box(&start))))

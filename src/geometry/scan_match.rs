@@ -101,7 +101,15 @@ impl ScanPoints {
         if dot <= 0.0 || self.angle_increment == 0.0 || !self.angle_increment.is_finite() {
             return None;
         }
-        let turn = (m[0] * p[1] - m[1] * p[0]) / dot;
+        let tangent = (m[0] * p[1] - m[1] * p[0]) / dot;
+        // The tangent is the angle within a twentieth of a 0.5° beam up
+        // to 0.1 rad; a wider turn (a fast one between sparse scans) needs
+        // the arc tangent.
+        let turn = if tangent.abs() > 0.1 {
+            tangent.atan()
+        } else {
+            tangent
+        };
         let shift = (turn / self.angle_increment).round();
         (shift.abs() < 1e6).then(|| i as i64 + shift as i64)
     }
@@ -170,18 +178,31 @@ fn normal(points: &[Option<[f64; 2]>], i: usize) -> Option<[f64; 2]> {
     (length > 0.0).then(|| [v[0] / length, v[1] / length])
 }
 
+/// Where [`align`] put the moving scan, and how much of it agreed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Alignment {
+    /// The moving scan's sensor pose in the reference's sensor frame.
+    pub pose: Pose2,
+    /// Moving points with a reference surface within the last gate
+    /// (0.08 m) of them at the last iteration.
+    pub pairs: usize,
+    /// Moving points within the range limits.
+    pub points: usize,
+}
+
 /// The pose of `moving`'s sensor in `reference`'s sensor frame, refined
 /// from `start` by point-to-line ICP; `None` when too few points pair up,
 /// when a direction of translation is left unconstrained (a corridor's
 /// length), or when the result strays from `start` by more than a
 /// refinement would.
-pub fn align(reference: &ScanPoints, moving: &ScanPoints, start: &Pose2) -> Option<Pose2> {
+pub fn align(reference: &ScanPoints, moving: &ScanPoints, start: &Pose2) -> Option<Alignment> {
     let mut pose = *start;
     let mut rows: Vec<([f64; 3], f64)> = Vec::with_capacity(moving.points.len());
     // Per moving point, the reference beam it paired with last: later
     // iterations look only beside it (the pose moves by millimetres).
     let mut paired: Vec<Option<i64>> = vec![None; moving.points.len()];
     let mut info = Matrix3::zeros();
+    let mut pairs = 0;
     for iteration in 0..ITERATIONS {
         let reach = gate(iteration);
         let (s, c) = pose.theta.sin_cos();
@@ -209,6 +230,7 @@ pub fn align(reference: &ScanPoints, moving: &ScanPoints, start: &Pose2) -> Opti
         if rows.len() < MIN_PAIRS {
             return None;
         }
+        pairs = rows.len();
         let keep = ((KEPT * rows.len() as f64) as usize).max(MIN_PAIRS);
         if keep < rows.len() {
             rows.select_nth_unstable_by(keep, |a, b| a.1.abs().total_cmp(&b.1.abs()));
@@ -233,7 +255,11 @@ pub fn align(reference: &ScanPoints, moving: &ScanPoints, start: &Pose2) -> Opti
     let fits = weakest >= MIN_TRANSLATION_INFO
         && change.x.hypot(change.y) <= MAX_CHANGE
         && change.theta.abs() <= MAX_TURN;
-    fits.then_some(pose)
+    fits.then(|| Alignment {
+        pose,
+        pairs,
+        points: moving.points.iter().flatten().count(),
+    })
 }
 
 #[cfg(test)]
@@ -256,9 +282,25 @@ mod tests {
         let truth = a.between(&b);
         let start = truth.compose(&Pose2::new(0.04, -0.03, 0.02));
         let found = align(&points(&room, &a, 1), &points(&room, &b, 2), &start).unwrap();
-        let error = truth.between(&found);
+        assert!(found.pairs > 9 * found.points / 10, "{found:?}");
+        let error = truth.between(&found.pose);
         assert!(error.x.hypot(error.y) < 0.003, "{error:?}");
         assert!(error.theta.abs() < 0.002, "{error:?}");
+    }
+
+    #[test]
+    fn pairs_beams_across_a_fast_turn() {
+        // 1 rad between the scans (a fast turn between sparse scans): its
+        // tangent would look 64 beams away from the partners.
+        let room = World::room_with_boxes();
+        let a = Pose2::new(4.0, 3.0, 0.2);
+        let b = Pose2::new(4.2, 3.1, 1.2);
+        let truth = a.between(&b);
+        let start = truth.compose(&Pose2::new(0.03, 0.02, -0.03));
+        let found = align(&points(&room, &a, 1), &points(&room, &b, 2), &start).unwrap();
+        let error = truth.between(&found.pose);
+        assert!(error.x.hypot(error.y) < 0.005, "{error:?}");
+        assert!(error.theta.abs() < 0.003, "{error:?}");
     }
 
     #[test]

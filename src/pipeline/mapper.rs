@@ -2,6 +2,7 @@
 //! keyframes grow the maps and the keyframe graph. The offline run and
 //! the live daemon both feed it.
 
+use std::f64::consts::PI;
 use std::time::Instant;
 
 use nalgebra::{Matrix3, Vector3};
@@ -9,7 +10,7 @@ use tracing::{debug, trace_span, warn};
 
 use super::jambs::JambTracks;
 use super::offline::SKIPPED_EXAMPLES;
-use super::prediction::{Estimate, MotionPredictor, OdometryFeed, OdometryReading};
+use super::prediction::{Estimate, MotionPredictor, OdometryFeed, OdometryReading, compose};
 use super::rejection::{Rejection, RejectionKind};
 use super::smoothing;
 use super::start::{HINT_COVARIANCE, MapMode, StartSearch};
@@ -24,6 +25,7 @@ use crate::graph::{
 };
 use crate::input::ScanRecord;
 use crate::localize::global::{FreeSpace, GlobalConfig};
+use crate::localize::local::{rotation_limit, translation_limit};
 use crate::localize::{LocalizationResult, LocalizeError, localize, localize_searching_heading};
 use crate::map::cls::{ClsError, ClsMap, local_region};
 use crate::map::{Keyframe, KeyframePolicy, MapContents, SegmentMap};
@@ -60,8 +62,9 @@ pub struct Mapper {
     /// The previous scan's lines in the map frame, the fallback reference
     /// when the map offers too little to localize against.
     previous_scan: SegmentIndex,
-    /// The last scan's points, pose and time, for the step to the next.
-    last_points: Option<(ScanPoints, Pose2, f64)>,
+    /// The last scan's points and where it was taken, for the step to the
+    /// next and for localizing the next against it.
+    last_scan: Option<LastScan>,
     trajectory: Vec<StampedPose>,
     /// Per trajectory entry, the motion from the entry before, measured by
     /// matching the two scans' points (`None` where they were not).
@@ -131,6 +134,40 @@ const MAX_AGAINST_LOADED_MAP: f64 = 1.0;
 const MAX_MATCH_GAP: f64 = 1.0;
 const MAX_MATCH_STEP: f64 = 0.5;
 const MAX_MATCH_TURN: f64 = 0.35;
+/// A scan whose lines found too little to localize is matched point to
+/// point against the last scan when that one was localized at most this
+/// long before (s): sparse logs keep a scan per second or so.
+const MAX_FALLBACK_GAP: f64 = 2.0;
+/// The headings the point match starts from around the prediction's are
+/// this far apart (rad), within the localizer's rotation limit: each start
+/// brings in headings within about half of it (the match refines by at
+/// most 0.1 rad).
+const FALLBACK_HEADING_STEP: f64 = 0.1;
+/// A point match sets the heading when at least this share of the scan's
+/// points pairs with the last scan's surfaces (scans 0.8 m and 12° apart
+/// shared 42 %), and no match from a start elsewhere pairs nearly as many
+/// (this share of the best's).
+const FALLBACK_MIN_SHARE: f64 = 0.3;
+const FALLBACK_RIVAL_SHARE: f64 = 0.8;
+/// σ of a point-matched step (m, rad) where the scans are a fast turn
+/// apart: a centimetre and 0.6°, looser than between consecutive dense
+/// scans (see [`smoothing`]).
+const FALLBACK_STEP_SIGMA: (f64, f64) = (0.01, 0.01);
+/// The lines' fix from the point-matched pose is taken only when it stays
+/// this close to it (m, rad): two witnesses, each of which alone was seen
+/// to mislead (points matched 25° off in a thinned log, two lines 16° off
+/// in another).
+const FALLBACK_AGREEMENT: (f64, f64) = (0.1, 0.035);
+
+/// The last scan's points and where it was taken.
+#[derive(Debug)]
+struct LastScan {
+    points: ScanPoints,
+    pose: Pose2,
+    t: f64,
+    /// Whether the pose was localized (a reference for the next scan).
+    localized: bool,
+}
 
 impl Mapper {
     pub fn new(config: MapperConfig) -> Self {
@@ -145,7 +182,7 @@ impl Mapper {
             odometry: OdometryFeed::new(config.odometry_time_offset).learning(config.max_scan_lag),
             predictor: MotionPredictor::default(),
             previous_scan: SegmentIndex::new(),
-            last_points: None,
+            last_scan: None,
             trajectory: Vec::new(),
             steps: Vec::new(),
             anchors: Vec::new(),
@@ -466,23 +503,105 @@ impl Mapper {
     /// The motion from the last scan to this one at `pose`, from their
     /// points, when the two are close enough in time and place for their
     /// points to pair up; remembers this scan's points for the next.
-    fn match_last_scan(&mut self, record: &ScanRecord, pose: &Pose2) -> Option<Pose2> {
-        let range = &self.config.extraction;
-        let points = ScanPoints::new(&record.scan, range.min_range, range.max_range);
-        let last = self.last_points.replace((points, *pose, record.scan.t))?;
-        let (reference, last_pose, last_t) = last;
-        let moved = last_pose.between(pose);
-        let near = record.scan.t - last_t <= MAX_MATCH_GAP
+    fn match_last_scan(&self, current: &ScanPoints, t: f64, pose: &Pose2) -> Option<Pose2> {
+        let last = self.last_scan.as_ref()?;
+        let moved = last.pose.between(pose);
+        let near = t - last.t <= MAX_MATCH_GAP
             && moved.x.hypot(moved.y) <= MAX_MATCH_STEP
             && moved.theta.abs() <= MAX_MATCH_TURN;
         if !near {
             return None;
         }
+        self.align_with_last(&last.points, current, &moved)
+            .map(|a| a.pose)
+    }
+
+    /// [`scan_match::align`] of `current` against the last scan's
+    /// `reference` from the robot's step `moved`; the alignment's pose is
+    /// the robot's step.
+    fn align_with_last(
+        &self,
+        reference: &ScanPoints,
+        current: &ScanPoints,
+        moved: &Pose2,
+    ) -> Option<scan_match::Alignment> {
         let mount = self.config.laser_mount;
-        let start = mount.inverse().compose(&moved).compose(&mount);
-        let current = &self.last_points.as_ref()?.0;
-        let found = scan_match::align(&reference, current, &start)?;
-        Some(mount.compose(&found).compose(&mount.inverse()))
+        let start = mount.inverse().compose(moved).compose(&mount);
+        let found = scan_match::align(reference, current, &start)?;
+        Some(scan_match::Alignment {
+            pose: mount.compose(&found.pose).compose(&mount.inverse()),
+            ..found
+        })
+    }
+
+    /// Localizes a scan whose lines found too little to match, neither
+    /// the map's nor the last scan's: its `points` are matched against the
+    /// last scan's (when that one was localized just before), from the
+    /// predicted heading and from headings around it as far as the
+    /// localizer's rotation limit, and the map's lines are then matched
+    /// from the pose found. The point match must pair
+    /// [`FALLBACK_MIN_SHARE`] of the points with no rival elsewhere, and
+    /// the lines' fix must agree with it ([`FALLBACK_AGREEMENT`]). Odometry
+    /// headings in a fast turn between sparse scans were seen 16° off,
+    /// where only two lines matched at the right heading.
+    fn localize_by_last_scan(
+        &self,
+        points: &ScanPoints,
+        t: f64,
+        predicted: Pose2,
+        predicted_cov: &[[f64; 3]; 3],
+    ) -> Option<LocalizationResult> {
+        let last = self
+            .last_scan
+            .as_ref()
+            .filter(|l| l.localized && t - l.t <= MAX_FALLBACK_GAP)?;
+        let cfg = &self.config.localizer;
+        let limit = rotation_limit(predicted_cov, cfg);
+        let starts = (limit.min(PI) / FALLBACK_HEADING_STEP).floor() as i32;
+        let mut found: Vec<scan_match::Alignment> = (-starts..=starts)
+            .filter_map(|k| {
+                let turned = Pose2::new(
+                    predicted.x,
+                    predicted.y,
+                    predicted.theta + f64::from(k) * FALLBACK_HEADING_STEP,
+                );
+                self.align_with_last(&last.points, points, &last.pose.between(&turned))
+            })
+            .collect();
+        found.sort_by_key(|a| std::cmp::Reverse(a.pairs));
+        let best = *found.first()?;
+        if (best.pairs as f64) < FALLBACK_MIN_SHARE * best.points as f64 {
+            return None;
+        }
+        let rival = found.iter().skip(1).find(|a| {
+            let d = best.pose.between(&a.pose);
+            d.x.hypot(d.y) > 0.1 || d.theta.abs() > FALLBACK_HEADING_STEP
+        });
+        if rival.is_some_and(|r| r.pairs as f64 >= FALLBACK_RIVAL_SHARE * best.pairs as f64) {
+            return None;
+        }
+        let (sx, st) = FALLBACK_STEP_SIGMA;
+        let q = [
+            [sx * sx, 0.0, 0.0],
+            [0.0, sx * sx, 0.0],
+            [0.0, 0.0, st * st],
+        ];
+        let (pose, covariance) = compose(&last.pose, &self.last_covariance, &best.pose, &q);
+        let moved = (pose.x - predicted.x).hypot(pose.y - predicted.y);
+        if moved > translation_limit(predicted_cov, cfg)
+            || wrap_angle(pose.theta - predicted.theta).abs() > limit
+        {
+            return None;
+        }
+        let fix = localize(&self.lines, self.map.index(), pose, &covariance, cfg).ok()?;
+        let agree = pose.between(&fix.pose);
+        let (max_offset, max_turn) = FALLBACK_AGREEMENT;
+        (agree.x.hypot(agree.y) <= max_offset && agree.theta.abs() <= max_turn).then_some(
+            LocalizationResult {
+                heading_searched: true,
+                ..fix
+            },
+        )
     }
 
     /// The first `end` poses (the lists grow together, one entry per
@@ -519,6 +638,8 @@ impl Mapper {
     /// which consecutive scans share far more reliably.
     fn localize_with_fallback(
         &self,
+        points: &ScanPoints,
+        t: f64,
         predicted: Pose2,
         predicted_cov: &[[f64; 3]; 3],
         outcome: &mut ScanOutcome,
@@ -534,16 +655,24 @@ impl Mapper {
             Err(LocalizeError::TooFewMatches { .. })
                 if self.config.previous_scan_fallback && !self.previous_scan.is_empty() =>
             {
-                let fix = localize_searching_heading(
+                match localize_searching_heading(
                     &self.lines,
                     &self.previous_scan,
                     predicted,
                     predicted_cov,
                     cfg,
-                )
-                .map_err(Rejection::Localize)?;
-                outcome.by_previous_scan = true;
-                Ok(fix)
+                ) {
+                    Ok(fix) => {
+                        outcome.by_previous_scan = true;
+                        Ok(fix)
+                    }
+                    // The last scan's points then set the heading the
+                    // map's lines are matched from.
+                    Err(e @ LocalizeError::TooFewMatches { .. }) => self
+                        .localize_by_last_scan(points, t, predicted, predicted_cov)
+                        .ok_or(Rejection::Localize(e)),
+                    Err(e) => Err(Rejection::Localize(e)),
+                }
             }
             // The previous scan's fix was refused as too large a jump too:
             // the lines keep asking for the same big correction, so the
@@ -589,6 +718,9 @@ impl Mapper {
         let poses = self.graph.poses();
         self.predictor.reframe(&c.correction);
         self.keyframes.reframe(&c.correction);
+        if let Some(last) = &mut self.last_scan {
+            last.pose = c.correction.compose(&last.pose);
+        }
         for ((_, pose), anchor) in self.trajectory.iter_mut().zip(&self.anchors) {
             if let Some((k, relative)) = anchor {
                 *pose = poses[*k].compose(relative);
@@ -880,6 +1012,8 @@ impl Mapper {
             by_previous_scan: false,
         };
         let mut cov = predicted_cov;
+        let range = &self.config.extraction;
+        let points = ScanPoints::new(&record.scan, range.min_range, range.max_range);
         // Whether the map may learn from this scan: always when localized
         // (or on the first scan), and after a failure only when the scan
         // shows too little known structure to localize (new territory);
@@ -887,8 +1021,15 @@ impl Mapper {
         let mut may_update_map = true;
         if !self.map.is_empty() {
             let t = Instant::now();
-            let result = trace_span!("localize")
-                .in_scope(|| self.localize_with_fallback(predicted, &predicted_cov, &mut outcome));
+            let result = trace_span!("localize").in_scope(|| {
+                self.localize_with_fallback(
+                    &points,
+                    record.scan.t,
+                    predicted,
+                    &predicted_cov,
+                    &mut outcome,
+                )
+            });
             self.clocks.localize.add(t.elapsed());
             self.previous_refused_jump = matches!(
                 result,
@@ -1133,14 +1274,20 @@ impl Mapper {
         self.trajectory.push((record.scan.t, outcome.pose));
         let step = if self.measure_steps {
             let t = Instant::now();
-            let step =
-                trace_span!("scan_match").in_scope(|| self.match_last_scan(record, &outcome.pose));
+            let step = trace_span!("scan_match")
+                .in_scope(|| self.match_last_scan(&points, record.scan.t, &outcome.pose));
             self.clocks.scan_match.add(t.elapsed());
             step
         } else {
             None
         };
         self.steps.push(step);
+        self.last_scan = Some(LastScan {
+            points,
+            pose: outcome.pose,
+            t: record.scan.t,
+            localized: outcome.localized,
+        });
         // Before a resumed session's first keyframe, the last keyframe is
         // the old session's, anywhere in the map: no anchor.
         let anchor = if self.first_session_keyframe {

@@ -526,7 +526,7 @@ fn add_scaled(q: &mut Covariance, other: &Covariance, k: f64) {
 /// `base ∘ step` with covariance `J Σbase Jᵀ + Q`, `J = ∂(base ∘ step)/∂base`.
 /// `Q` needs no rotation into the map frame: its translation part is
 /// isotropic.
-fn compose(
+pub(crate) fn compose(
     base: &Pose2,
     base_cov: &Covariance,
     step: &Pose2,
