@@ -46,6 +46,10 @@ const MIN_PAIRS: usize = 15;
 /// 1° scans' 181 beams (at 30 pairs and 20, CSAIL decimated to 1° beams
 /// gained nothing from the smoothing; at 15 and 10, 0.0337 → 0.0326 m).
 const MIN_TRANSLATION_INFO: f64 = 10.0;
+/// Least information (as above) along a direction for an iteration to
+/// step along it at all: below it the step there is noise (a corridor's
+/// length, two walls' points a few degrees from parallel).
+const MIN_STEP_INFO: f64 = 1.0;
 /// A result farther than this from the start (m, rad) is a different
 /// alignment, not a refinement.
 const MAX_CHANGE: f64 = 0.2;
@@ -188,13 +192,18 @@ pub struct Alignment {
     pub pairs: usize,
     /// Moving points within the range limits.
     pub points: usize,
+    /// The direction of translation (unit, reference sensor frame) the
+    /// points leave open, a corridor's length, if any: along it the pose
+    /// is the start's.
+    pub open: Option<[f64; 2]>,
 }
 
 /// The pose of `moving`'s sensor in `reference`'s sensor frame, refined
 /// from `start` by point-to-line ICP; `None` when too few points pair up,
-/// when a direction of translation is left unconstrained (a corridor's
-/// length), or when the result strays from `start` by more than a
-/// refinement would.
+/// or when the result strays from `start` by more than a refinement
+/// would. A direction of translation with less than
+/// [`MIN_TRANSLATION_INFO`] (a corridor's length) is not moved along and
+/// is named in the result.
 pub fn align(reference: &ScanPoints, moving: &ScanPoints, start: &Pose2) -> Option<Alignment> {
     let mut pose = *start;
     let mut rows: Vec<([f64; 3], f64)> = Vec::with_capacity(moving.points.len());
@@ -243,23 +252,62 @@ pub fn align(reference: &ScanPoints, moving: &ScanPoints, start: &Pose2) -> Opti
             info += j * j.transpose();
             g += j * *e;
         }
-        let step = info.cholesky()?.solve(&(-g));
+        let step = match weakest_translation(&info) {
+            (weakest, v) if weakest < MIN_STEP_INFO => solve_across(&info, &g, v)?,
+            _ => info.cholesky()?.solve(&(-g)),
+        };
         pose = Pose2::new(pose.x + step[0], pose.y + step[1], pose.theta + step[2]);
         if iteration >= 3 && step[0].hypot(step[1]) < 1e-4 && step[2].abs() < 1e-5 {
             break;
         }
     }
-    let (a, b, d) = (info[(0, 0)], info[(0, 1)], info[(1, 1)]);
-    let weakest = 0.5 * (a + d) - (0.25 * (a - d).powi(2) + b * b).sqrt();
+    let (weakest, v) = weakest_translation(&info);
+    let open = (weakest < MIN_TRANSLATION_INFO).then_some(v);
+    if let Some(v) = open {
+        // Each step kept off its own weakest direction; the last one
+        // names the direction, along which the start stands.
+        let along = v[0] * (pose.x - start.x) + v[1] * (pose.y - start.y);
+        pose = Pose2::new(pose.x - along * v[0], pose.y - along * v[1], pose.theta);
+    }
     let change = start.between(&pose);
-    let fits = weakest >= MIN_TRANSLATION_INFO
-        && change.x.hypot(change.y) <= MAX_CHANGE
-        && change.theta.abs() <= MAX_TURN;
+    let fits = change.x.hypot(change.y) <= MAX_CHANGE && change.theta.abs() <= MAX_TURN;
     fits.then(|| Alignment {
         pose,
         pairs,
         points: moving.points.iter().flatten().count(),
+        open,
     })
+}
+
+/// The smallest eigenvalue of the translation block of `info` and its
+/// unit eigenvector.
+fn weakest_translation(info: &Matrix3<f64>) -> (f64, [f64; 2]) {
+    let (a, b, d) = (info[(0, 0)], info[(0, 1)], info[(1, 1)]);
+    let weakest = 0.5 * (a + d) - (0.25 * (a - d).powi(2) + b * b).sqrt();
+    // A row of (block − weakest·I), turned a quarter, whichever is longer.
+    let (r1, r2) = ([a - weakest, b], [b, d - weakest]);
+    let r = if r1[0].hypot(r1[1]) >= r2[0].hypot(r2[1]) {
+        r1
+    } else {
+        r2
+    };
+    let length = r[0].hypot(r[1]);
+    let v = if length > 0.0 {
+        [-r[1] / length, r[0] / length]
+    } else {
+        [1.0, 0.0]
+    };
+    (weakest, v)
+}
+
+/// The Gauss–Newton step for information `info` and gradient `g` with no
+/// translation along the unit `v`: solved over the translation across it
+/// and the turn.
+fn solve_across(info: &Matrix3<f64>, g: &Vector3<f64>, v: [f64; 2]) -> Option<Vector3<f64>> {
+    let basis = nalgebra::Matrix3x2::new(-v[1], 0.0, v[0], 0.0, 0.0, 1.0);
+    let reduced = basis.transpose() * info * basis;
+    let x = reduced.cholesky()?.solve(&(-(basis.transpose() * g)));
+    Some(basis * x)
 }
 
 #[cfg(test)]
@@ -283,6 +331,7 @@ mod tests {
         let start = truth.compose(&Pose2::new(0.04, -0.03, 0.02));
         let found = align(&points(&room, &a, 1), &points(&room, &b, 2), &start).unwrap();
         assert!(found.pairs > 9 * found.points / 10, "{found:?}");
+        assert_eq!(found.open, None);
         let error = truth.between(&found.pose);
         assert!(error.x.hypot(error.y) < 0.003, "{error:?}");
         assert!(error.theta.abs() < 0.002, "{error:?}");
@@ -310,7 +359,15 @@ mod tests {
         let corridor = World::corridor(40.0, 2.0, None);
         let a = points(&corridor, &Pose2::new(15.0, 0.0, 0.0), 1);
         let b = points(&corridor, &Pose2::new(15.3, 0.0, 0.0), 2);
-        assert!(align(&a, &b, &Pose2::new(0.3, 0.0, 0.0)).is_none());
+        let start = Pose2::new(0.45, 0.04, 0.03);
+        let found = align(&a, &b, &start).unwrap();
+        let open = found.open.unwrap();
+        assert!(open[0].abs() > 0.999, "{found:?}");
+        // Across the corridor and in heading the points tell the step;
+        // along it the start stands.
+        assert!((found.pose.x - 0.45).abs() < 1e-3, "{found:?}");
+        assert!(found.pose.y.abs() < 0.005, "{found:?}");
+        assert!(found.pose.theta.abs() < 0.003, "{found:?}");
     }
 
     #[test]

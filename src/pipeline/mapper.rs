@@ -513,6 +513,7 @@ impl Mapper {
             return None;
         }
         self.align_with_last(&last.points, current, &moved)
+            .filter(|a| a.open.is_none())
             .map(|a| a.pose)
     }
 
@@ -541,9 +542,11 @@ impl Mapper {
     /// localizer's rotation limit, and the map's lines are then matched
     /// from the pose found. The point match must pair
     /// [`FALLBACK_MIN_SHARE`] of the points with no rival elsewhere, and
-    /// the lines' fix must agree with it ([`FALLBACK_AGREEMENT`]). Odometry
-    /// headings in a fast turn between sparse scans were seen 16° off,
-    /// where only two lines matched at the right heading.
+    /// the lines' fix must agree with it ([`FALLBACK_AGREEMENT`]). Where
+    /// the points leave a direction open (a corridor's length), the pose
+    /// along it is the prediction's, with the prediction's uncertainty.
+    /// Odometry headings in a fast turn between sparse scans were seen 16°
+    /// off, where only two lines matched at the right heading.
     fn localize_by_last_scan(
         &self,
         points: &ScanPoints,
@@ -586,7 +589,21 @@ impl Mapper {
             [0.0, sx * sx, 0.0],
             [0.0, 0.0, st * st],
         ];
-        let (pose, covariance) = compose(&last.pose, &self.last_covariance, &best.pose, &q);
+        let (pose, mut covariance) = compose(&last.pose, &self.last_covariance, &best.pose, &q);
+        if let Some(v) = best.open {
+            // Along the direction the points leave open (a corridor's
+            // length) the pose is the prediction's, and as uncertain.
+            let (s, c) = (last.pose.theta + self.config.laser_mount.theta).sin_cos();
+            let v = [c * v[0] - s * v[1], s * v[0] + c * v[1]];
+            let p = predicted_cov;
+            let along =
+                v[0] * (p[0][0] * v[0] + p[0][1] * v[1]) + v[1] * (p[1][0] * v[0] + p[1][1] * v[1]);
+            for (i, row) in covariance.iter_mut().take(2).enumerate() {
+                for (j, value) in row.iter_mut().take(2).enumerate() {
+                    *value += along * v[i] * v[j];
+                }
+            }
+        }
         let moved = (pose.x - predicted.x).hypot(pose.y - predicted.y);
         if moved > translation_limit(predicted_cov, cfg)
             || wrap_angle(pose.theta - predicted.theta).abs() > limit
