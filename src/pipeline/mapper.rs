@@ -2,6 +2,7 @@
 //! keyframes grow the maps and the keyframe graph. The offline run and
 //! the live daemon both feed it.
 
+use std::cell::OnceCell;
 use std::f64::consts::PI;
 use std::time::Instant;
 
@@ -18,7 +19,9 @@ use super::summary::{LastScanTimes, MappingSummary, StageClocks};
 use super::{MapSearch, PipelineError, ScanOutcome};
 use crate::files::trajectory::{AnchoredPose, StampedPose};
 use crate::geometry::scan_match::{self, ScanPoints};
-use crate::geometry::{CogLine, LineExtractor, Pose2, SegmentIndex, wrap_angle};
+use crate::geometry::{
+    CogLine, ExtractionConfig, LineExtractor, Pose2, RangeScan, SegmentIndex, wrap_angle,
+};
 use crate::graph::{
     AppliedOptimisation, Correction, KeyframeGraph, LoopSearchJob, LoopSearchResult,
     OptimisationJob, OptimisationResult,
@@ -159,10 +162,34 @@ const FALLBACK_STEP_SIGMA: (f64, f64) = (0.01, 0.01);
 /// in another).
 const FALLBACK_AGREEMENT: (f64, f64) = (0.1, 0.035);
 
+/// A scan and its points, worked out when first asked for: the daemon,
+/// which matches no steps, needs them only for a scan its lines failed on
+/// and the one before it.
+#[derive(Debug)]
+struct ScanWithPoints {
+    scan: RangeScan,
+    points: OnceCell<ScanPoints>,
+}
+
+impl ScanWithPoints {
+    fn new(scan: RangeScan) -> Self {
+        ScanWithPoints {
+            scan,
+            points: OnceCell::new(),
+        }
+    }
+
+    /// The points within `range`'s limits.
+    fn points(&self, range: &ExtractionConfig) -> &ScanPoints {
+        self.points
+            .get_or_init(|| ScanPoints::new(&self.scan, range.min_range, range.max_range))
+    }
+}
+
 /// The last scan's points and where it was taken.
 #[derive(Debug)]
 struct LastScan {
-    points: ScanPoints,
+    points: ScanWithPoints,
     pose: Pose2,
     t: f64,
     /// Whether the pose was localized (a reference for the next scan).
@@ -503,7 +530,7 @@ impl Mapper {
     /// The motion from the last scan to this one at `pose`, from their
     /// points, when the two are close enough in time and place for their
     /// points to pair up; remembers this scan's points for the next.
-    fn match_last_scan(&self, current: &ScanPoints, t: f64, pose: &Pose2) -> Option<Pose2> {
+    fn match_last_scan(&self, current: &ScanWithPoints, t: f64, pose: &Pose2) -> Option<Pose2> {
         let last = self.last_scan.as_ref()?;
         let moved = last.pose.between(pose);
         let near = t - last.t <= MAX_MATCH_GAP
@@ -512,7 +539,8 @@ impl Mapper {
         if !near {
             return None;
         }
-        self.align_with_last(&last.points, current, &moved)
+        let range = &self.config.extraction;
+        self.align_with_last(last.points.points(range), current.points(range), &moved)
             .filter(|a| a.open.is_none())
             .map(|a| a.pose)
     }
@@ -549,7 +577,7 @@ impl Mapper {
     /// off, where only two lines matched at the right heading.
     fn localize_by_last_scan(
         &self,
-        points: &ScanPoints,
+        current: &ScanWithPoints,
         t: f64,
         predicted: Pose2,
         predicted_cov: &[[f64; 3]; 3],
@@ -560,6 +588,8 @@ impl Mapper {
             .filter(|l| l.localized && t - l.t <= MAX_FALLBACK_GAP)?;
         let cfg = &self.config.localizer;
         let limit = rotation_limit(predicted_cov, cfg);
+        let range = &self.config.extraction;
+        let (reference, points) = (last.points.points(range), current.points(range));
         let starts = (limit.min(PI) / FALLBACK_HEADING_STEP).floor() as i32;
         let mut found: Vec<scan_match::Alignment> = (-starts..=starts)
             .filter_map(|k| {
@@ -568,7 +598,7 @@ impl Mapper {
                     predicted.y,
                     predicted.theta + f64::from(k) * FALLBACK_HEADING_STEP,
                 );
-                self.align_with_last(&last.points, points, &last.pose.between(&turned))
+                self.align_with_last(reference, points, &last.pose.between(&turned))
             })
             .collect();
         found.sort_by_key(|a| std::cmp::Reverse(a.pairs));
@@ -655,7 +685,7 @@ impl Mapper {
     /// which consecutive scans share far more reliably.
     fn localize_with_fallback(
         &self,
-        points: &ScanPoints,
+        current: &ScanWithPoints,
         t: f64,
         predicted: Pose2,
         predicted_cov: &[[f64; 3]; 3],
@@ -686,7 +716,7 @@ impl Mapper {
                     // The last scan's points then set the heading the
                     // map's lines are matched from.
                     Err(e @ LocalizeError::TooFewMatches { .. }) => self
-                        .localize_by_last_scan(points, t, predicted, predicted_cov)
+                        .localize_by_last_scan(current, t, predicted, predicted_cov)
                         .ok_or(Rejection::Localize(e)),
                     Err(e) => Err(Rejection::Localize(e)),
                 }
@@ -1029,8 +1059,7 @@ impl Mapper {
             by_previous_scan: false,
         };
         let mut cov = predicted_cov;
-        let range = &self.config.extraction;
-        let points = ScanPoints::new(&record.scan, range.min_range, range.max_range);
+        let current = ScanWithPoints::new(record.scan.clone());
         // Whether the map may learn from this scan: always when localized
         // (or on the first scan), and after a failure only when the scan
         // shows too little known structure to localize (new territory);
@@ -1040,7 +1069,7 @@ impl Mapper {
             let t = Instant::now();
             let result = trace_span!("localize").in_scope(|| {
                 self.localize_with_fallback(
-                    &points,
+                    &current,
                     record.scan.t,
                     predicted,
                     &predicted_cov,
@@ -1292,7 +1321,7 @@ impl Mapper {
         let step = if self.measure_steps {
             let t = Instant::now();
             let step = trace_span!("scan_match")
-                .in_scope(|| self.match_last_scan(&points, record.scan.t, &outcome.pose));
+                .in_scope(|| self.match_last_scan(&current, record.scan.t, &outcome.pose));
             self.clocks.scan_match.add(t.elapsed());
             step
         } else {
@@ -1300,7 +1329,7 @@ impl Mapper {
         };
         self.steps.push(step);
         self.last_scan = Some(LastScan {
-            points,
+            points: current,
             pose: outcome.pose,
             t: record.scan.t,
             localized: outcome.localized,
