@@ -1416,6 +1416,41 @@ mod tests {
         );
     }
 
+    /// Down a plain corridor (no end in reach) the robot turns 17° the
+    /// odometry does not report: the two walls' lines match at the right
+    /// heading only as a pair that leaves the corridor's length open, too
+    /// little to take from a heading search. The scan's points, matched
+    /// against the last scan's, give the heading; the length stays the
+    /// prediction's.
+    #[test]
+    fn a_heading_lost_in_a_corridor_is_found_by_the_last_scan_s_points() {
+        let world = World::corridor(40.0, 2.0, None);
+        let spec = ScanSpec::lms200_half_degree(0.005);
+        let mut rng = Rng::new(3);
+        let mut mapper = Mapper::new(MapperConfig::default());
+        let start = Pose2::new(10.0, 0.3, 0.0);
+        for k in 0..12 {
+            let turned = if k >= 8 { 0.3 } else { 0.0 };
+            let moved = Pose2::new(0.4 * k as f64, 0.0, turned);
+            let scan = cast_scan(
+                &world,
+                &start.compose(&moved),
+                &spec,
+                0.5 * k as f64,
+                &mut rng,
+            );
+            let out = mapper.process(&ScanRecord {
+                scan,
+                odometry: Some(Pose2::new(moved.x, moved.y, 0.0)),
+            });
+            if k >= 8 {
+                assert!(out.localized, "scan {k}: {out:?}");
+                assert!((out.pose.theta - turned).abs() < 0.01, "scan {k}: {out:?}");
+                assert!(out.pose.y.abs() < 0.02, "scan {k}: {out:?}");
+            }
+        }
+    }
+
     #[test]
     fn only_trusted_poses_update_the_map() {
         let world = World::room_with_boxes();
