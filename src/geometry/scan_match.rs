@@ -187,14 +187,14 @@ fn normal(points: &[Option<[f64; 2]>], i: usize) -> Option<[f64; 2]> {
 pub struct Alignment {
     /// The moving scan's sensor pose in the reference's sensor frame.
     pub pose: Pose2,
-    /// Moving points with a reference surface within the last gate
-    /// (0.08 m) of them at the last iteration.
+    /// Moving points that found a reference surface within the last gate
+    /// (0.08 m) in the last iteration.
     pub pairs: usize,
     /// Moving points within the range limits.
     pub points: usize,
-    /// The direction of translation (unit, reference sensor frame) the
-    /// points leave open, a corridor's length, if any: along it the pose
-    /// is the start's.
+    /// The direction of translation (unit, in the reference scan's sensor
+    /// frame) the points leave open, a corridor's length, if any: along it
+    /// the pose is the start's.
     pub open: Option<[f64; 2]>,
 }
 
@@ -202,10 +202,41 @@ pub struct Alignment {
 /// from `start` by point-to-line ICP; `None` when too few points pair up,
 /// or when the result strays from `start` by more than a refinement
 /// would. A direction of translation with less than
-/// [`MIN_TRANSLATION_INFO`] (a corridor's length) is not moved along and
-/// is named in the result.
+/// [`MIN_TRANSLATION_INFO`] at the end (a corridor's length) is named in
+/// the result and held at the start's, the rest found again with it
+/// held.
 pub fn align(reference: &ScanPoints, moving: &ScanPoints, start: &Pose2) -> Option<Alignment> {
-    let mut pose = *start;
+    let (mut pose, mut pairs, info) = refine(reference, moving, *start, None)?;
+    let (weakest, v) = weakest_translation(&info);
+    let open = (weakest < MIN_TRANSLATION_INFO).then_some(v);
+    if let Some(v) = open {
+        // Along the open direction the start stands: back there, and the
+        // heading and the offset across found again with it held.
+        let along = v[0] * (pose.x - start.x) + v[1] * (pose.y - start.y);
+        let held = Pose2::new(pose.x - along * v[0], pose.y - along * v[1], pose.theta);
+        (pose, pairs, _) = refine(reference, moving, held, Some(v))?;
+    }
+    let change = start.between(&pose);
+    let fits = change.x.hypot(change.y) <= MAX_CHANGE && change.theta.abs() <= MAX_TURN;
+    fits.then(|| Alignment {
+        pose,
+        pairs,
+        points: moving.points.iter().flatten().count(),
+        open,
+    })
+}
+
+/// Point-to-line ICP iterations from `start`: the pose, the pairs of the
+/// last iteration and their information matrix; `None` when too few pair
+/// up. With `hold`, no step moves along that unit direction; without,
+/// no step moves along a direction with less than [`MIN_STEP_INFO`].
+fn refine(
+    reference: &ScanPoints,
+    moving: &ScanPoints,
+    start: Pose2,
+    hold: Option<[f64; 2]>,
+) -> Option<(Pose2, usize, Matrix3<f64>)> {
+    let mut pose = start;
     let mut rows: Vec<([f64; 3], f64)> = Vec::with_capacity(moving.points.len());
     // Per moving point, the reference beam it paired with last: later
     // iterations look only beside it (the pose moves by millimetres).
@@ -252,31 +283,17 @@ pub fn align(reference: &ScanPoints, moving: &ScanPoints, start: &Pose2) -> Opti
             info += j * j.transpose();
             g += j * *e;
         }
-        let step = match weakest_translation(&info) {
-            (weakest, v) if weakest < MIN_STEP_INFO => solve_across(&info, &g, v)?,
-            _ => info.cholesky()?.solve(&(-g)),
+        let step = match (hold, weakest_translation(&info)) {
+            (Some(v), _) => solve_across(&info, &g, v)?,
+            (None, (weakest, v)) if weakest < MIN_STEP_INFO => solve_across(&info, &g, v)?,
+            (None, _) => info.cholesky()?.solve(&(-g)),
         };
         pose = Pose2::new(pose.x + step[0], pose.y + step[1], pose.theta + step[2]);
         if iteration >= 3 && step[0].hypot(step[1]) < 1e-4 && step[2].abs() < 1e-5 {
             break;
         }
     }
-    let (weakest, v) = weakest_translation(&info);
-    let open = (weakest < MIN_TRANSLATION_INFO).then_some(v);
-    if let Some(v) = open {
-        // Each step kept off its own weakest direction; the last one
-        // names the direction, along which the start stands.
-        let along = v[0] * (pose.x - start.x) + v[1] * (pose.y - start.y);
-        pose = Pose2::new(pose.x - along * v[0], pose.y - along * v[1], pose.theta);
-    }
-    let change = start.between(&pose);
-    let fits = change.x.hypot(change.y) <= MAX_CHANGE && change.theta.abs() <= MAX_TURN;
-    fits.then(|| Alignment {
-        pose,
-        pairs,
-        points: moving.points.iter().flatten().count(),
-        open,
-    })
+    Some((pose, pairs, info))
 }
 
 /// The smallest eigenvalue of the translation block of `info` and its
