@@ -689,7 +689,9 @@ impl Mapper {
     /// Localizes the current lines against the map; when the map offers
     /// too few matches (curved walls cut into different chords by each
     /// scan, freshly entered space), against the previous scan's lines,
-    /// which consecutive scans share far more reliably.
+    /// which consecutive scans share far more reliably; when those are too
+    /// few as well, from the heading the last scan's points give
+    /// ([`Self::localize_by_last_scan`]).
     fn localize_with_fallback(
         &self,
         current: &ScanWithPoints,
