@@ -170,6 +170,29 @@ pub(crate) fn cog_line(points: &[ScanPoint], fit: &LineFit) -> Option<CogLine> {
     ))
 }
 
+/// The eigenvalues of the symmetric 2×2 matrix `[[a, b], [b, d]]`,
+/// largest then smallest, and the unit eigenvector of the smallest (its
+/// sign arbitrary): a scatter's or an information matrix's principal
+/// axes, in closed form.
+pub(crate) fn principal_axes(a: f64, b: f64, d: f64) -> (f64, f64, [f64; 2]) {
+    let mean = 0.5 * (a + d);
+    let radius = (0.25 * (a - d) * (a - d) + b * b).sqrt();
+    let smallest = mean - radius;
+    // The better-conditioned of the two forms.
+    let v = if (a - smallest).abs() >= (d - smallest).abs() {
+        [-b, a - smallest]
+    } else {
+        [d - smallest, -b]
+    };
+    let norm = v[0].hypot(v[1]);
+    let direction = if norm > 0.0 {
+        [v[0] / norm, v[1] / norm]
+    } else {
+        [1.0, 0.0]
+    };
+    (mean + radius, smallest, direction)
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {

@@ -20,6 +20,7 @@ pub use ends::JambGap;
 pub use extract::{
     ExtractionConfig, LineExtractor, RangeNoise, SeenJamb, extract_lines, scan_points,
 };
+pub(crate) use fit::principal_axes;
 pub use pose::{Pose2, wrap_angle, wrap_angle_positive};
 pub use scan::{BeamFault, RangeScan};
 

@@ -13,6 +13,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+use super::fit::principal_axes;
 use super::pose::Pose2;
 use super::scan::RangeScan;
 
@@ -166,20 +167,8 @@ fn normal(points: &[Option<[f64; 2]>], i: usize) -> Option<[f64; 2]> {
         let (dx, dy) = (q[0] - mx, q[1] - my);
         (a + dx * dx, b + dy * dy, c + dx * dy)
     });
-    let half = 0.5 * (xx + yy);
-    let root = (0.25 * (xx - yy).powi(2) + xy * xy).sqrt();
-    let (along, across) = (half + root, half - root);
-    if along <= 0.0 || across > NORMAL_FLATNESS * along {
-        return None;
-    }
-    // The scatter's eigenvector of the smaller eigenvalue, from whichever
-    // row of (S − across·I) is the longer.
-    let a = [xy, across - xx];
-    let b = [across - yy, xy];
-    let norm2 = |v: [f64; 2]| v[0] * v[0] + v[1] * v[1];
-    let v = if norm2(a) >= norm2(b) { a } else { b };
-    let length = norm2(v).sqrt();
-    (length > 0.0).then(|| [v[0] / length, v[1] / length])
+    let (along, across, normal) = principal_axes(xx, xy, yy);
+    (along > 0.0 && across <= NORMAL_FLATNESS * along).then_some(normal)
 }
 
 /// Where [`align`] put the moving scan, and how much of it agreed.
@@ -299,21 +288,7 @@ fn refine(
 /// The smallest eigenvalue of the translation block of `info` and its
 /// unit eigenvector.
 fn weakest_translation(info: &Matrix3<f64>) -> (f64, [f64; 2]) {
-    let (a, b, d) = (info[(0, 0)], info[(0, 1)], info[(1, 1)]);
-    let weakest = 0.5 * (a + d) - (0.25 * (a - d).powi(2) + b * b).sqrt();
-    // A row of (block − weakest·I), turned a quarter, whichever is longer.
-    let (r1, r2) = ([a - weakest, b], [b, d - weakest]);
-    let r = if r1[0].hypot(r1[1]) >= r2[0].hypot(r2[1]) {
-        r1
-    } else {
-        r2
-    };
-    let length = r[0].hypot(r[1]);
-    let v = if length > 0.0 {
-        [-r[1] / length, r[0] / length]
-    } else {
-        [1.0, 0.0]
-    };
+    let (_, weakest, v) = principal_axes(info[(0, 0)], info[(0, 1)], info[(1, 1)]);
     (weakest, v)
 }
 
@@ -339,17 +314,29 @@ mod tests {
         ScanPoints::new(&scan, 0.05, 80.0)
     }
 
+    /// The scans of the room with boxes from `a` and `b` aligned from the
+    /// true motion put `off`: the alignment and its error.
+    fn aligned_in_the_room(a: Pose2, b: Pose2, off: Pose2) -> (Alignment, Pose2) {
+        let room = World::room_with_boxes();
+        let truth = a.between(&b);
+        let found = align(
+            &points(&room, &a, 1),
+            &points(&room, &b, 2),
+            &truth.compose(&off),
+        )
+        .unwrap();
+        (found, truth.between(&found.pose))
+    }
+
     #[test]
     fn recovers_the_motion_between_two_scans_from_a_start_centimetres_off() {
-        let room = World::room_with_boxes();
-        let a = Pose2::new(4.0, 3.0, 0.2);
-        let b = Pose2::new(4.3, 3.12, 0.27);
-        let truth = a.between(&b);
-        let start = truth.compose(&Pose2::new(0.04, -0.03, 0.02));
-        let found = align(&points(&room, &a, 1), &points(&room, &b, 2), &start).unwrap();
+        let (found, error) = aligned_in_the_room(
+            Pose2::new(4.0, 3.0, 0.2),
+            Pose2::new(4.3, 3.12, 0.27),
+            Pose2::new(0.04, -0.03, 0.02),
+        );
         assert!(found.pairs > 9 * found.points / 10, "{found:?}");
         assert_eq!(found.open, None);
-        let error = truth.between(&found.pose);
         assert!(error.x.hypot(error.y) < 0.003, "{error:?}");
         assert!(error.theta.abs() < 0.002, "{error:?}");
     }
@@ -358,13 +345,11 @@ mod tests {
     fn pairs_beams_across_a_fast_turn() {
         // 1 rad between the scans (a fast turn between sparse scans): its
         // tangent would look 64 beams away from the partners.
-        let room = World::room_with_boxes();
-        let a = Pose2::new(4.0, 3.0, 0.2);
-        let b = Pose2::new(4.2, 3.1, 1.2);
-        let truth = a.between(&b);
-        let start = truth.compose(&Pose2::new(0.03, 0.02, -0.03));
-        let found = align(&points(&room, &a, 1), &points(&room, &b, 2), &start).unwrap();
-        let error = truth.between(&found.pose);
+        let (_, error) = aligned_in_the_room(
+            Pose2::new(4.0, 3.0, 0.2),
+            Pose2::new(4.2, 3.1, 1.2),
+            Pose2::new(0.03, 0.02, -0.03),
+        );
         assert!(error.x.hypot(error.y) < 0.005, "{error:?}");
         assert!(error.theta.abs() < 0.003, "{error:?}");
     }

@@ -10,7 +10,7 @@
 
 use nalgebra::{Matrix2, Matrix3, Vector2, Vector3};
 
-use crate::geometry::{CogLine, Pose2, wrap_angle};
+use crate::geometry::{CogLine, Pose2, principal_axes, wrap_angle};
 
 /// Farthest apart (m, beyond 3 σ) a local and a map wall end may be and
 /// still be taken for the same end.
@@ -262,23 +262,7 @@ pub(crate) fn weakest_translation(h_lines: &Matrix3<f64>) -> ([f64; 2], f64) {
     } else {
         htt
     };
-    // Closed-form eigen-decomposition of the symmetric 2×2 `m`.
-    let (a, b, d) = (m[(0, 0)], 0.5 * (m[(0, 1)] + m[(1, 0)]), m[(1, 1)]);
-    let mean = 0.5 * (a + d);
-    let radius = (0.25 * (a - d) * (a - d) + b * b).sqrt();
-    let lambda_min = mean - radius;
-    // Eigenvector of the smaller eigenvalue; pick the better-conditioned form.
-    let v = if (a - lambda_min).abs() >= (d - lambda_min).abs() {
-        [-b, a - lambda_min]
-    } else {
-        [d - lambda_min, -b]
-    };
-    let norm = v[0].hypot(v[1]);
-    let dir = if norm > 0.0 {
-        [v[0] / norm, v[1] / norm]
-    } else {
-        [1.0, 0.0]
-    };
+    let (_, lambda_min, dir) = principal_axes(m[(0, 0)], 0.5 * (m[(0, 1)] + m[(1, 0)]), m[(1, 1)]);
     let sigma = if lambda_min > 0.0 {
         1.0 / lambda_min.sqrt()
     } else {
