@@ -6,7 +6,9 @@
 //! scans of unchanged odometry, then up to 0.9 m and 50° at once). A
 //! reading identical to the previous one is therefore not taken as "no
 //! motion": such scans, and scans without odometry, are predicted at
-//! constant velocity with the no-odometry noise. When odometry moves
+//! constant velocity with the no-odometry noise (but for odometry that
+//! had come to rest before it repeated itself: a robot standing still).
+//! When odometry moves
 //! again, either localization tracked the robot through the whole gap —
 //! then the tracked pose is kept and the odometry merely re-anchored — or
 //! it did not, and the odometry increment since the last fresh scan is
@@ -503,6 +505,10 @@ pub struct MotionPredictor {
     last: Option<(Pose2, Covariance)>,
     /// Estimated motion over the previous scan interval (robot frame).
     last_step: Option<Pose2>,
+    /// The odometry's own last fresh step (unscaled): a log's odometry
+    /// that had come to rest and then repeats its reading is a robot
+    /// standing still, not frozen odometry.
+    last_odometry_step: Option<Pose2>,
     /// The reading of the scan being processed, until `record`.
     pending: Option<(f64, OdometryReading)>,
     /// The odometry step (from the anchor, unscaled) of the pending
@@ -584,7 +590,18 @@ impl MotionPredictor {
             };
         };
         let constant_velocity = || {
-            let step = self.last_step.unwrap_or(Pose2::IDENTITY);
+            // Odometry that had come to rest: the robot stands still (the
+            // ACES log repeats a standstill's reading for 6 s, and the
+            // scans' last steps, a few centimetres of noise, carried on at
+            // constant velocity took the pose 12 m down a corridor).
+            let at_rest = self.last_odometry_step.is_some_and(|o| {
+                o.x.hypot(o.y) < noise.min_translation && o.theta.abs() < noise.min_rotation
+            });
+            let step = if at_rest {
+                Pose2::IDENTITY
+            } else {
+                self.last_step.unwrap_or(Pose2::IDENTITY)
+            };
             let q = noise.increment_covariance(None, noise.floor_period);
             let (pose, cov) = compose(&prev, &prev_cov, &step, &q);
             Prediction {
@@ -655,10 +672,13 @@ impl MotionPredictor {
     /// anchored afresh at the next scan that has it.
     pub fn record(&mut self, pose: Pose2, cov: Covariance, estimate: Estimate) {
         let localized = estimate != Estimate::Predicted;
-        if let (Some(step), Some(anchor), Estimate::Localized) =
-            (self.pending_step.take(), &self.anchor, estimate)
-        {
-            self.bias.observe(&step, &anchor.pose.between(&pose));
+        if let (Some(step), Some(anchor)) = (self.pending_step.take(), &self.anchor) {
+            if matches!(self.pending, Some((_, OdometryReading::Fresh(_)))) {
+                self.last_odometry_step = Some(step);
+            }
+            if estimate == Estimate::Localized {
+                self.bias.observe(&step, &anchor.pose.between(&pose));
+            }
         }
         if estimate == Estimate::Jumped {
             self.pending = None;
@@ -763,6 +783,35 @@ mod tests {
             x(0.6),
             x(0.7),
         ]
+    }
+
+    #[test]
+    fn odometry_come_to_rest_and_repeated_is_standing_still() {
+        let mut feed = OdometryFeed::new(0.0);
+        let mut predictor = MotionPredictor::default();
+        // Slowing to a stop: 0.1 m, then 2 mm, then the same reading on.
+        let odometry = [x(0.0), x(0.1), x(0.102), x(0.102), x(0.102)];
+        // Localization put the scans 5 cm apart at the stop (noise).
+        let localized = [0.0, 0.1, 0.15];
+        let mut predicted = Vec::new();
+        for (k, o) in odometry.iter().enumerate() {
+            let t = 0.2 * k as f64;
+            let p = predictor.predict(t, feed.reading(t, *o), &NOISE);
+            let pose = localized
+                .get(k)
+                .map_or(p.pose, |&v| Pose2::new(v, 0.0, 0.0));
+            predictor.record(pose, p.cov, Estimate::Localized);
+            predicted.push(p);
+        }
+        // Not the scans' last 5 cm carried on: the robot stands.
+        assert!(!predicted[3].from_odometry);
+        assert!(
+            (predicted[3].pose.x - 0.15).abs() < 1e-12,
+            "{:?}",
+            predicted[3].pose
+        );
+        assert!((predicted[4].pose.x - 0.15).abs() < 1e-12);
+        // Moving odometry that freezes is still carried on (below).
     }
 
     #[test]
