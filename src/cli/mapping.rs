@@ -253,15 +253,18 @@ pub fn render(
 /// The mapper configuration from `path` (TOML), or the defaults; where it
 /// leaves `laser_mount` out, the laser's mounting as the log `input`
 /// (read with `log`) declares it (see [`pipeline::take_declared_mount`]),
-/// and where it leaves `extraction.max_range` out, the ranges end under
-/// the log's own code for no return ([`pipeline::take_no_return_code`]).
+/// where it leaves `extraction.max_range` out, the ranges end under
+/// the log's own code for no return ([`pipeline::take_no_return_code`]),
+/// and where it leaves the range noise and the line split and merge
+/// thresholds out, they widen to the noise the log shows
+/// ([`pipeline::take_wall_scatter`]).
 pub fn mapper_config(
     path: Option<&Path>,
     input: &Path,
     log: &LogOptions,
 ) -> anyhow::Result<MapperConfig> {
-    let (mut config, sets_mount, sets_max_range) = match path {
-        None => (MapperConfig::default(), false, false),
+    let (mut config, sets_mount, sets_max_range, sets_noise) = match path {
+        None => (MapperConfig::default(), false, false, false),
         Some(path) => {
             let text = clsmap::files::durable::read_bounded(
                 path,
@@ -272,13 +275,28 @@ pub fn mapper_config(
                 .with_context(|| format!("invalid configuration {}", path.display()))?;
             let table = text.parse::<toml::Table>().unwrap_or_default();
             let sets_mount = table.contains_key("laser_mount");
-            let sets_max_range = table
-                .get("extraction")
-                .and_then(toml::Value::as_table)
-                .is_some_and(|e| e.contains_key("max_range"));
-            (config, sets_mount, sets_max_range)
+            let extraction = table.get("extraction").and_then(toml::Value::as_table);
+            let sets = |key: &str| extraction.is_some_and(|e| e.contains_key(key));
+            let sets_max_range = sets("max_range");
+            let sets_noise =
+                sets("range_noise") || sets("split_threshold") || sets("merge_threshold");
+            (config, sets_mount, sets_max_range, sets_noise)
         }
     };
+    if !sets_noise
+        && let Some(scaled) = pipeline::take_wall_scatter(&mut config, input, log)
+            .with_context(|| format!("cannot read {}", input.display()))?
+    {
+        println!(
+            "{}'s ranges scatter {:.1} mm about its walls (σ, from {} runs of beams), more \
+             than the range noise model allows: the model and the line split and merge \
+             thresholds are taken {:.2} times as wide",
+            input.display(),
+            1e3 * scaled.scatter.sigma,
+            scaled.scatter.runs,
+            scaled.factor
+        );
+    }
     if !sets_max_range
         && let Some(code) = pipeline::take_no_return_code(&mut config, input)
             .with_context(|| format!("cannot read {}", input.display()))?

@@ -10,6 +10,7 @@ mod points;
 pub mod pose;
 pub mod scan;
 pub mod scan_match;
+mod scatter;
 mod split;
 
 pub use cog_line::{CogLine, WallEnds};
@@ -23,6 +24,7 @@ pub use extract::{
 pub(crate) use fit::principal_axes;
 pub use pose::{Pose2, wrap_angle, wrap_angle_positive};
 pub use scan::{BeamFault, RangeScan};
+pub use scatter::{WallScatter, wall_scatter};
 
 /// Distance (m) from `p` to the closed segment `ab` (to `a` when the
 /// segment has no length).

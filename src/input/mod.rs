@@ -303,6 +303,23 @@ pub fn no_return_code(path: &Path) -> Result<Option<f64>, InputError> {
     })
 }
 
+/// Scans read for [`wall_scatter`]: a few minutes of a log.
+const SCATTER_SCANS: usize = 2000;
+
+/// The range noise the log at `path` shows over its first
+/// [`SCATTER_SCANS`] scans ([`crate::geometry::wall_scatter`]); scans that
+/// cannot be read are passed over here (the mapping names them).
+pub fn wall_scatter(
+    path: &Path,
+    options: &LogOptions,
+) -> Result<Option<crate::geometry::WallScatter>, InputError> {
+    let scans = open_log_with(path, options)?
+        .filter_map(Result::ok)
+        .take(SCATTER_SCANS)
+        .map(|record| record.scan);
+    Ok(crate::geometry::wall_scatter(scans))
+}
+
 /// Opens a log file for streaming; see [`LogFile::open`].
 pub fn open_log(path: &Path) -> Result<LogFile, InputError> {
     LogFile::open(path)

@@ -51,8 +51,8 @@ pub mod summary;
 pub use config::MapperConfig;
 pub use mapper::Mapper;
 pub use offline::{
-    MapRunOptions, Progress, SKIPPED_EXAMPLES, evaluate_relations, run_offline_mapping,
-    take_declared_mount, take_no_return_code,
+    MapRunOptions, NoiseScaling, Progress, SKIPPED_EXAMPLES, evaluate_relations,
+    run_offline_mapping, take_declared_mount, take_no_return_code, take_wall_scatter,
 };
 pub use output::{
     MAP_FILE, PICTURE_FILE, TRAJECTORY_FILE, create_output_dir, write_maps, write_outputs,
