@@ -17,8 +17,9 @@ use std::borrow::Borrow;
 const RUN: usize = 9;
 /// Runs start this many beams apart.
 const RUN_STEP: usize = 5;
-/// Ranges (m) used: nearer readings are too few on one wall, and farther
-/// ones may mix in long-range noise the near walls do not show.
+/// Ranges (m) used: nearer readings are the sensor's faults, and farther
+/// ones scatter more (CSAIL's runs: 5 mm under 4 m, 13 mm beyond 8 m)
+/// while a run of them spans metres of wall.
 const MIN_RANGE: f64 = 0.1;
 const MAX_RANGE: f64 = 8.0;
 /// Largest range step (m) between neighbours within a run: a larger one
