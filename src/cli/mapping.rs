@@ -150,6 +150,19 @@ pub fn map(
     if let Some(relations) = relations {
         let trajectory_file = out.join(pipeline::TRAJECTORY_FILE);
         print_errors(&score(&trajectory_file, relations)?);
+        if summary.logged_odometry > 0 {
+            // The same relations scored on the log's own odometry: what
+            // the map is worth over dead reckoning.
+            let odometry = score(&out.join(pipeline::ODOMETRY_FILE), relations)?;
+            println!(
+                "  the log's odometry alone: {:.3} ± {:.3} m, {:.3} ± {:.3} deg ({} relations)",
+                odometry.translation_m.mean,
+                odometry.translation_m.std_dev,
+                odometry.rotation_deg.mean,
+                odometry.rotation_deg.std_dev,
+                odometry.used
+            );
+        }
     }
     let partial = summary.input_broken.is_some()
         || summary.skipped_input > 0

@@ -32,6 +32,11 @@ impl Pose2 {
         theta: 0.0,
     };
 
+    /// Whether every component is finite (a log may carry NaN or ∞).
+    pub fn is_finite(&self) -> bool {
+        self.x.is_finite() && self.y.is_finite() && self.theta.is_finite()
+    }
+
     /// A pose with its heading wrapped to (-π, π].
     pub fn new(x: f64, y: f64, theta: f64) -> Self {
         Pose2 {

@@ -975,9 +975,7 @@ impl Mapper {
         let _scan_span = trace_span!("scan", t = record.scan.t).entered();
         // A non-finite odometry pose would poison every prediction after
         // it: the scan is mapped as one without odometry.
-        let odometry = record
-            .odometry
-            .filter(|p| p.x.is_finite() && p.y.is_finite() && p.theta.is_finite());
+        let odometry = record.odometry.filter(Pose2::is_finite);
         if odometry.is_none() && record.odometry.is_some() {
             self.summary.scans_with_bad_odometry += 1;
             if self.summary.scans_with_bad_odometry <= SKIPPED_EXAMPLES {

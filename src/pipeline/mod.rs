@@ -55,7 +55,8 @@ pub use offline::{
     run_offline_mapping, take_declared_mount, take_no_return_code, take_wall_scatter,
 };
 pub use output::{
-    MAP_FILE, PICTURE_FILE, TRAJECTORY_FILE, create_output_dir, write_maps, write_outputs,
+    MAP_FILE, ODOMETRY_FILE, PICTURE_FILE, TRAJECTORY_FILE, create_output_dir, write_maps,
+    write_odometry, write_outputs,
 };
 pub use prediction::{MotionPredictor, OdometryFeed, OdometryReading, Prediction};
 pub use rejection::RejectionKind;

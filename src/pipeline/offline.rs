@@ -5,12 +5,13 @@ use std::path::Path;
 
 use tracing::warn;
 
-use super::output::write_outputs;
+use super::output::{write_odometry, write_outputs};
 use super::start::MapMode;
 use super::summary::MappingSummary;
 use super::{Mapper, PipelineError};
 use crate::eval::{EvalError, RelationErrors, evaluate_relations as evaluate_against};
 use crate::files::trajectory::StampedPose;
+use crate::geometry::Pose2;
 use crate::input::{
     DeclaredMount, InputError, LogOptions, declared_laser_mount, no_return_code, open_log_with,
 };
@@ -80,6 +81,8 @@ pub fn run_offline_mapping(
     mapper.measure_scan_steps();
     let mut input_broken = None;
     let (mut skipped, mut examples) = (0, Vec::new());
+    // The log's own odometry at each mapped scan: the baseline.
+    let mut odometry: Vec<StampedPose> = Vec::new();
     while let Some(record) = log.next() {
         let record = match record {
             Ok(r) => r,
@@ -99,6 +102,9 @@ pub fn run_offline_mapping(
             Err(e) => return Err(e.into()),
         };
         mapper.process(&record);
+        if let Some(o) = record.odometry.filter(Pose2::is_finite) {
+            odometry.push((record.scan.t, o));
+        }
         progress(Progress {
             scans: mapper.summary.scans,
             bytes_read: log.bytes_read(),
@@ -130,7 +136,9 @@ pub fn run_offline_mapping(
             "localization failed on some scans; their odometry prediction was used"
         );
     }
+    summary.logged_odometry = odometry.len();
     write_outputs(out_dir, &mapper, draw_loops)?;
+    write_odometry(out_dir, &odometry)?;
     Ok(summary)
 }
 

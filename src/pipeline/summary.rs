@@ -160,6 +160,9 @@ pub struct MappingSummary {
     pub cls_rejected: usize,
     /// Scans that carried no odometry.
     pub scans_without_odometry: usize,
+    /// Scans whose logged odometry an offline run wrote beside the
+    /// trajectory (`odometry.tum`), the baseline to score it against.
+    pub logged_odometry: usize,
     /// Scans whose odometry equalled the previous scan's (standing still,
     /// or odometry frozen); predicted at constant velocity.
     pub scans_with_unchanged_odometry: usize,

@@ -17,7 +17,7 @@ fn map_on_the_recording_writes_its_files_and_beats_the_odometry() {
     assert_eq!(trajectory.len(), CSAIL_SCANS);
     // The map frame is the first pose.
     assert_eq!(trajectory[0][1..], [0.0, 0.0, 0.0]);
-    for name in ["trajectory.tum", "map.json", "map.svg"] {
+    for name in ["trajectory.tum", "odometry.tum", "map.json", "map.svg"] {
         assert!(out.join(name).is_file(), "{name} missing:\n{run}");
     }
     for line in run.stdout.lines() {
@@ -44,6 +44,25 @@ fn map_on_the_recording_writes_its_files_and_beats_the_odometry() {
     let logged = parse_score(&eval.stdout);
     assert!(mapped.used > 50, "{mapped:?}");
     assert_eq!(mapped.used, logged.used, "same relations for both");
+    // `map` scored the odometry it wrote beside the trajectory the same
+    // way: the odometry read here from the log, independently.
+    let baseline = run
+        .stdout
+        .lines()
+        .find_map(|l| l.trim_start().strip_prefix("the log's odometry alone:"))
+        .unwrap_or_else(|| panic!("no odometry baseline in:\n{run}"));
+    let words: Vec<&str> = baseline.split_ascii_whitespace().collect();
+    assert_eq!(
+        words[0],
+        format!("{:.3}", logged.translation_m),
+        "{baseline}"
+    );
+    assert_eq!(
+        words[4],
+        format!("{:.3}", logged.rotation_deg),
+        "{baseline}"
+    );
+    assert_eq!(words[8], format!("({}", logged.used), "{baseline}");
     // These 42 s are mostly turns on the spot: the odometry's translation
     // is already within the map's noise (both 0.027 m to the printed
     // millimetre), its heading is not.
