@@ -48,7 +48,8 @@ pub struct MapRunOptions<'a> {
 pub const SKIPPED_EXAMPLES: usize = 5;
 
 /// Maps a log file offline and writes its outputs (see [`write_outputs`])
-/// into `out_dir` (created if needed). Input items that cannot be used (a
+/// and the log's own odometry (see [`write_odometry`]) into `out_dir`
+/// (created if needed). Input items that cannot be used (a
 /// malformed line, a bad odometry sample, a damaged recording record, a
 /// scan out of time order) are skipped, counted and the first few named
 /// (see [`crate::input`]); with `strict` the first one ends the run with
