@@ -245,7 +245,7 @@ impl LiveMapper {
     }
 
     /// The odometry pose at `t`: interpolated, or extrapolated up to
-    /// [`MAX_EXTRAPOLATION`] past the newest sample.
+    /// `MAX_EXTRAPOLATION` past the newest sample.
     pub fn odometry_at(&self, t: f64) -> Option<Pose2> {
         let last = self.odometry.last_time()?;
         if t <= last {

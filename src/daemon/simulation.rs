@@ -5,7 +5,7 @@
 //! on a pseudo-terminal and runs at the sensor's real pace. `VirtualRobot`
 //! wires the same pieces — emulator, serial link state machine, simulated
 //! base, [`LiveMapper`], [`BaseDriver`] — through
-//! [`VirtualLine`](lms200::virtual_line::VirtualLine) instead, so the
+//! [`VirtualLine`] instead, so the
 //! telegrams, the link's timing, the odometry and the exploration all run
 //! as they would, only as fast as the CPU allows: an hour of robot time in
 //! a minute or two, for tests and soak runs.

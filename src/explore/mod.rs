@@ -9,7 +9,7 @@
 //! - [`planner`]: shortest paths in it ([`plan_path`]).
 //! - [`goal`]: the goal pose in front of a frontier.
 //! - [`memory`]: frontiers given up on, so none is chased forever.
-//! - [`open_way`]: the way to drive farthest in a scan, for a robot that
+//! - [`mod@open_way`]: the way to drive farthest in a scan, for a robot that
 //!   does not know where it is.
 //! - [`pursuit`]: [`next_step`], the choice of the next frontier.
 //! - [`follow`]: [`PathFollower`], velocities along a path for a holonomic base.

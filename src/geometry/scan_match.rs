@@ -191,7 +191,7 @@ pub struct Alignment {
 /// from `start` by point-to-line ICP; `None` when too few points pair up,
 /// or when the result strays from `start` by more than a refinement
 /// would. A direction of translation with less than
-/// [`MIN_TRANSLATION_INFO`] at the end (a corridor's length) is named in
+/// `MIN_TRANSLATION_INFO` at the end (a corridor's length) is named in
 /// the result and held at the start's, the rest found again with it
 /// held.
 pub fn align(reference: &ScanPoints, moving: &ScanPoints, start: &Pose2) -> Option<Alignment> {

@@ -42,7 +42,7 @@ pub struct WallScatter {
 }
 
 /// The range noise `scans` show, if they hold enough runs of beams on
-/// smooth surfaces ([`MIN_RUNS`]).
+/// smooth surfaces (`MIN_RUNS`).
 pub fn wall_scatter<S: Borrow<RangeScan>>(
     scans: impl IntoIterator<Item = S>,
 ) -> Option<WallScatter> {

@@ -324,10 +324,10 @@ const MOUNT_TOLERANCE: f64 = 1e-3;
 /// odometry, both still while the log begins).
 const MAX_MOUNT_OFFSET: f64 = 2.0;
 
-/// The laser's pose on the robot as the first [`MOUNT_LINES`] laser lines
+/// The laser's pose on the robot as the first `MOUNT_LINES` laser lines
 /// of a CARMEN log declare it (ROBOTLASER1 carries the laser's pose beside
 /// the robot's; FLASER and RAWLASER lines declare none). Mounts that
-/// disagree, or one farther than [`MAX_MOUNT_OFFSET`] from the robot's
+/// disagree, or one farther than `MAX_MOUNT_OFFSET` from the robot's
 /// centre (a corrected laser pose beside raw odometry), are
 /// [`DeclaredMount::Varying`]. Lines that cannot be parsed are passed over
 /// here; the mapping names them.
@@ -371,10 +371,10 @@ const MM_MODE_CODES: [f64; 2] = [8.183, 8.191];
 
 /// The shortest range (m) a CARMEN log writes for a beam without an echo,
 /// where it writes one below the SICK cm-mode codes (81.9 m and up, always
-/// read as none), from its first [`NO_RETURN_LINES`] laser lines:
-/// their longest reading, when [`NO_RETURN_BEAMS`] beams of each of
-/// [`NO_RETURN_SCANS`] scans read exactly it, in runs whose neighbours read
-/// none or read more than [`NO_RETURN_STEP`] nearer. A code is read by
+/// read as none), from its first `NO_RETURN_LINES` laser lines:
+/// their longest reading, when `NO_RETURN_BEAMS` beams of each of
+/// `NO_RETURN_SCANS` scans read exactly it, in runs whose neighbours read
+/// none or read more than `NO_RETURN_STEP` nearer. A code is read by
 /// every beam that meets nothing; a real surface that far by beams beside
 /// others that read it within its noise. Where that longest reading is one
 /// of the 8 m mode's special values, any of them counts, and all of them

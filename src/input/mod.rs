@@ -307,7 +307,7 @@ pub fn no_return_code(path: &Path) -> Result<Option<f64>, InputError> {
 const SCATTER_SCANS: usize = 2000;
 
 /// The range noise the log at `path` shows over its first
-/// [`SCATTER_SCANS`] scans ([`crate::geometry::wall_scatter`]); scans that
+/// `SCATTER_SCANS` scans ([`crate::geometry::wall_scatter`]); scans that
 /// cannot be read are passed over here (the mapping names them).
 pub fn wall_scatter(
     path: &Path,

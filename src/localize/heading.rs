@@ -95,8 +95,8 @@ pub fn heading_candidates(
 /// first error. A searched heading needs one match more than
 /// `cfg.min_matches`, since it was chosen to make lines match, and must
 /// leave no direction unconstrained. When nothing within the rotation
-/// limit fits, headings up to [`WIDE_SEARCH`] times as far are tried, a
-/// fix there needing more than [`WIDE_SEARCH_MATCHES`] times the matches.
+/// limit fits, headings up to `WIDE_SEARCH` times as far are tried, a
+/// fix there needing more than `WIDE_SEARCH_MATCHES` times the matches.
 pub fn localize_searching_heading(
     local: &[CogLine],
     map: &SegmentIndex,

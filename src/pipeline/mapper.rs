@@ -399,7 +399,7 @@ impl Mapper {
         }
     }
 
-    /// What the map is made of, as [`MAP_FILE`] stores it: the CLS map,
+    /// What the map is made of, as [`super::MAP_FILE`] stores it: the CLS map,
     /// the walls, and the keyframes (shared, not copied) with their poses
     /// and the pose graph's edges.
     pub fn contents(&self) -> MapContents {

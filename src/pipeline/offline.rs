@@ -202,7 +202,7 @@ pub struct NoiseScaling {
 }
 
 /// Widens the range noise model to the noise the log at `input` shows,
-/// when that is more than the model allows ([`NOISE_MODEL_MARGIN`]): the
+/// when that is more than the model allows (`NOISE_MODEL_MARGIN`): the
 /// model (`extraction.range_noise`) and the line split and merge
 /// thresholds, which are a few σ of it, scale alike. Some public logs'
 /// ranges scatter four times as much as an LMS200's (ACES, on a 5 cm

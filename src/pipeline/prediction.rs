@@ -367,14 +367,14 @@ impl Default for HeadingFit {
 ///
 /// The drift is the least-squares `d` in `localized turn − odometry turn ≈
 /// d · |odometry step|` (rad/m), over steps that turn less than
-/// [`OdometryBias::STRAIGHT`] (in turns the odometry's heading lags by
-/// more than any drift), less [`OdometryBias::SIGNIFICANCE`] of its
+/// `OdometryBias::STRAIGHT` (in turns the odometry's heading lags by
+/// more than any drift), less `OdometryBias::SIGNIFICANCE` of its
 /// standard errors. Localization corrects the heading of each scan, but
 /// its prior carries the drift, and the walls each fix adds to the map
 /// turn with it: on a simulated loop with 0.01 rad/m of drift the whole
 /// map came out turned by 0.2°.
 ///
-/// Both forget over about the last [`OdometryBias::MEMORY`] metres.
+/// Both forget over about the last `OdometryBias::MEMORY` metres.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct OdometryBias {
     /// Σ localized · odometry (m²), decayed with distance.
@@ -453,7 +453,7 @@ impl OdometryBias {
     }
 
     /// The factor (within `1 ± max_correction`) on the odometry's
-    /// distances; 1 until the fit has seen [`OdometryBias::WARM_UP`] metres.
+    /// distances; 1 until the fit has seen `OdometryBias::WARM_UP` metres.
     pub fn scale(&self, max_correction: f64) -> f64 {
         if self.travelled < Self::WARM_UP || self.squared <= 0.0 {
             return 1.0;
@@ -464,7 +464,7 @@ impl OdometryBias {
 
     /// The heading drift (rad/m, within `± max_drift`) to add to the
     /// odometry's turns; 0 until the fit has seen
-    /// [`OdometryBias::WARM_UP`] metres of straight steps.
+    /// `OdometryBias::WARM_UP` metres of straight steps.
     pub fn heading_drift(&self, max_drift: f64) -> f64 {
         if self.straight_travelled < Self::WARM_UP || self.straight_steps <= 2.0 {
             return 0.0;

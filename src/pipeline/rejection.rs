@@ -1,4 +1,4 @@
-//! Why a scan's localization was not used: the reason ([`Rejection`],
+//! Why a scan's localization was not used: the reason (`Rejection`,
 //! with its numbers, for the log) and its kind ([`RejectionKind`], counted
 //! in the summary).
 
