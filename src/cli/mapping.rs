@@ -4,7 +4,7 @@ use std::path::Path;
 use std::process::ExitCode;
 
 use anyhow::Context as _;
-use clsmap::eval::RelationErrors;
+use clsmap::eval::{LOCAL_SPAN, RelationErrors};
 use clsmap::files::trajectory::read_tum;
 use clsmap::input::{DeclaredMount, LogOptions};
 use clsmap::map::cls::{self, GridConfig};
@@ -202,6 +202,16 @@ fn print_errors(e: &RelationErrors) {
         e.rotation_deg.mean,
         e.rotation_deg.std_dev,
         e.rotation_deg.max
+    );
+    // Local accuracy and global consistency fail differently: the split
+    // says which one a score is made of.
+    println!(
+        "  by span:     {:.3} m over the {} relations up to {} s apart, {:.3} m over the {} longer",
+        e.local_translation_m.mean,
+        e.local_used,
+        LOCAL_SPAN,
+        e.global_translation_m.mean,
+        e.used - e.local_used
     );
 }
 

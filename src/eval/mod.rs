@@ -3,6 +3,6 @@
 pub mod relations;
 
 pub use relations::{
-    ErrorStats, EvalError, RELATION_TIME_TOLERANCE, Relation, RelationErrors, evaluate,
+    ErrorStats, EvalError, LOCAL_SPAN, RELATION_TIME_TOLERANCE, Relation, RelationErrors, evaluate,
     evaluate_relations, read_relations,
 };

@@ -96,7 +96,19 @@ pub struct RelationErrors {
     pub translation_sq_m2: ErrorStats,
     /// Squared rotational error (deg²).
     pub rotation_sq_deg2: ErrorStats,
+    /// Translational error (m) of the relations at most
+    /// [`LOCAL_SPAN`] apart, and how many: the local accuracy.
+    pub local_translation_m: ErrorStats,
+    pub local_used: usize,
+    /// Translational error (m) of the longer relations: the map's global
+    /// consistency (loops closed or not).
+    pub global_translation_m: ErrorStats,
 }
+
+/// Longest time (s) between a relation's two scans for it to count as
+/// local: a few metres of path, where drift has not built up and no loop
+/// is needed.
+pub const LOCAL_SPAN: f64 = 3.0;
 
 /// Reads a relations file.
 pub fn read_relations<R: BufRead>(input: R) -> Result<Vec<Relation>, EvalError> {
@@ -152,6 +164,7 @@ pub fn evaluate(trajectory: &[(f64, Pose2)], relations: &[Relation]) -> Relation
     by_time.sort_by(|&a, &b| trajectory[a].0.total_cmp(&trajectory[b].0));
     let mut trans = Vec::with_capacity(relations.len());
     let mut rot = Vec::with_capacity(relations.len());
+    let (mut local, mut global) = (Vec::new(), Vec::new());
     let mut missing = 0;
     for r in relations {
         match (
@@ -162,6 +175,11 @@ pub fn evaluate(trajectory: &[(f64, Pose2)], relations: &[Relation]) -> Relation
                 let (dt, dr) = relation_error(&a.between(&b), &r.delta);
                 trans.push(dt);
                 rot.push(dr.to_degrees());
+                if (r.t2 - r.t1).abs() <= LOCAL_SPAN {
+                    local.push(dt);
+                } else {
+                    global.push(dt);
+                }
             }
             _ => missing += 1,
         }
@@ -174,6 +192,9 @@ pub fn evaluate(trajectory: &[(f64, Pose2)], relations: &[Relation]) -> Relation
         rotation_deg: ErrorStats::of(&rot),
         translation_sq_m2: ErrorStats::of(&sq(&trans)),
         rotation_sq_deg2: ErrorStats::of(&sq(&rot)),
+        local_translation_m: ErrorStats::of(&local),
+        local_used: local.len(),
+        global_translation_m: ErrorStats::of(&global),
     }
 }
 
@@ -252,6 +273,16 @@ mod tests {
         assert!((e.translation_m.mean - 0.1).abs() < 1e-9, "{e:?}");
         assert!(e.translation_m.std_dev < 1e-9);
         assert!((e.translation_sq_m2.mean - 0.01).abs() < 1e-9);
+        // The steps are 0.2 s apart, all local; a relation over 8 s sums
+        // forty of those errors and is global.
+        assert_eq!(e.local_used, 49);
+        assert!((e.local_translation_m.mean - 0.1).abs() < 1e-9);
+        let mut with_long = rel.clone();
+        with_long.extend(relations_of(&gt, &[(0, 40)]));
+        let e = evaluate(&est, &with_long);
+        assert_eq!((e.used, e.local_used), (50, 49));
+        assert!(e.global_translation_m.mean > 1.0, "{e:?}");
+        assert!((e.local_translation_m.mean - 0.1).abs() < 1e-9);
         assert!(e.rotation_deg.max < 1e-9);
     }
 

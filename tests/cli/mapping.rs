@@ -63,6 +63,21 @@ fn map_on_the_recording_writes_its_files_and_beats_the_odometry() {
         "{baseline}"
     );
     assert_eq!(words[8], format!("({}", logged.used), "{baseline}");
+    // The score split by span: every relation used is counted once.
+    let by_span: Vec<usize> = run
+        .stdout
+        .lines()
+        .find_map(|l| l.trim_start().strip_prefix("by span:"))
+        .unwrap_or_else(|| panic!("no split by span in:\n{run}"))
+        .split_ascii_whitespace()
+        .filter_map(|w| w.parse().ok())
+        .collect();
+    assert_eq!(
+        by_span.len(),
+        3,
+        "{by_span:?}: local count, span, longer count"
+    );
+    assert_eq!(by_span[0] + by_span[2], mapped.used, "{by_span:?}");
     // These 42 s are mostly turns on the spot: the odometry's translation
     // is already within the map's noise (both 0.027 m to the printed
     // millimetre), its heading is not.
