@@ -21,6 +21,13 @@ pub const PICTURE_FILE: &str = "map.svg";
 /// against.
 pub const ODOMETRY_FILE: &str = "odometry.tum";
 
+/// Writes `poses` to `path` in TUM format, atomically.
+fn write_tum_file(path: &Path, poses: &[StampedPose]) -> Result<(), PipelineError> {
+    let mut tum = Vec::new();
+    write_tum(&mut tum, poses)?;
+    write_file(path, &tum)
+}
+
 fn write_file(path: &Path, bytes: &[u8]) -> Result<(), PipelineError> {
     crate::files::durable::write_atomically(path, bytes).map_err(|source| PipelineError::Output {
         path: path.to_owned(),
@@ -39,9 +46,7 @@ pub fn write_outputs(
 ) -> Result<(), PipelineError> {
     create_output_dir(out_dir)?;
     let trajectory = mapper.smoothed_trajectory();
-    let mut tum = Vec::new();
-    write_tum(&mut tum, &trajectory)?;
-    write_file(&out_dir.join(TRAJECTORY_FILE), &tum)?;
+    write_tum_file(&out_dir.join(TRAJECTORY_FILE), &trajectory)?;
     let poses: Vec<Pose2> = trajectory.iter().map(|(_, p)| *p).collect();
     let loops = if draw_loops {
         mapper.loop_edges()
@@ -65,9 +70,7 @@ pub fn write_odometry(out_dir: &Path, odometry: &[StampedPose]) -> Result<(), Pi
             _ => Ok(()),
         };
     }
-    let mut tum = Vec::new();
-    write_tum(&mut tum, odometry)?;
-    write_file(&path, &tum)
+    write_tum_file(&path, odometry)
 }
 
 /// Creates `out_dir` and its parents if needed.
