@@ -1198,6 +1198,80 @@ fn a_saved_map_is_localized_in_and_extended() {
     extended.cls_map().check_invariants().unwrap();
 }
 
+/// A corrected log (each scan at its true pose, as GMapping's
+/// `*-corrected.log` files hold them) turned into a mapping test by
+/// `scripts/corrected_carmen.py`: the loop world driven twice, a scan every
+/// 0.5 m. With the odometry it synthesises the map scores near its
+/// reference, far nearer than that odometry, and with exact odometry
+/// (seed 0) nearer still.
+#[test]
+fn a_corrected_log_made_a_test_by_its_script_maps_to_its_reference() {
+    let (world, truth, _, mut rng) = loop_driven(2, 5);
+    let spec = ScanSpec::lms200_half_degree(0.01);
+    let mut corrected = String::new();
+    for (k, p) in truth.iter().enumerate().step_by(5) {
+        let scan = cast_scan(&world, p, &spec, step_time(k), &mut rng);
+        let pose = format!("{} {} {}", p.x, p.y, p.theta);
+        corrected += &format!(
+            "FLASER {} {pose} {pose} {t} pippo {t}\n",
+            carmen_ranges(&scan, 81.91),
+            t = scan.t
+        );
+    }
+    let work = tempfile::tempdir().unwrap();
+    let log = work.path().join("loop-corrected.log");
+    std::fs::write(&log, corrected).unwrap();
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scripts/corrected_carmen.py");
+    let python = std::env::var("CLSMAP_PYTHON").unwrap_or_else(|_| "python3".into());
+    let score = |seed: u32| {
+        let prefix = work.path().join(format!("loop_s{seed}"));
+        let out = std::process::Command::new(&python)
+            .arg(&script)
+            .arg(&log)
+            .arg(&prefix)
+            .arg(format!("--seed={seed}"))
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let relations = read_relations(std::io::BufReader::new(
+            std::fs::File::open(prefix.with_extension("relations")).unwrap(),
+        ))
+        .unwrap();
+        let (_, tum) = map_into(
+            &prefix.with_extension("clf"),
+            &work.path().join(format!("map_s{seed}")),
+            &MapperConfig::default(),
+        );
+        let odometry: Vec<(f64, Pose2)> = open_log(&prefix.with_extension("clf"))
+            .unwrap()
+            .map(|r| r.unwrap())
+            .map(|r| (r.scan.t, r.odometry.unwrap()))
+            .collect();
+        let mapped = evaluate(&tum, &relations);
+        let dead_reckoned = evaluate(&odometry, &relations);
+        show(&format!("seed {seed}, mapped"), &mapped);
+        show(&format!("seed {seed}, odometry alone"), &dead_reckoned);
+        // Each scan to the next five, and the second lap's revisits.
+        assert!(
+            relations.len() > 5 * (truth.len() / 5 - 5),
+            "{}",
+            relations.len()
+        );
+        assert!(relations.iter().any(|r| r.t2 - r.t1 > 30.0));
+        (mapped.translation_m.mean, dead_reckoned.translation_m.mean)
+    };
+    let (exact, exact_odometry) = score(0);
+    let (noisy, noisy_odometry) = score(1);
+    assert!(exact_odometry < 1e-5, "{exact_odometry}");
+    assert!(exact < 0.02, "{exact}");
+    assert!(noisy < 0.03, "{noisy}");
+    assert!(noisy_odometry > 3.0 * noisy, "{noisy_odometry} vs {noisy}");
+}
+
 /// The Python that runs the bag scripts: `CLSMAP_PYTHON` (CI sets it to
 /// a virtual environment with PyPI `rosbags`), else `python3`.
 fn python_with_rosbags() -> std::process::Command {
