@@ -1225,17 +1225,12 @@ fn a_corrected_log_made_a_test_by_its_script_maps_to_its_reference() {
     let python = std::env::var("CLSMAP_PYTHON").unwrap_or_else(|_| "python3".into());
     let score = |seed: u32| {
         let prefix = work.path().join(format!("loop_s{seed}"));
-        let out = std::process::Command::new(&python)
-            .arg(&script)
-            .arg(&log)
-            .arg(&prefix)
-            .arg(format!("--seed={seed}"))
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        succeeds(
+            std::process::Command::new(&python)
+                .arg(&script)
+                .arg(&log)
+                .arg(&prefix)
+                .arg(format!("--seed={seed}")),
         );
         let relations = read_relations(std::io::BufReader::new(
             std::fs::File::open(prefix.with_extension("relations")).unwrap(),
@@ -1272,6 +1267,17 @@ fn a_corrected_log_made_a_test_by_its_script_maps_to_its_reference() {
     assert!(noisy_odometry > 3.0 * noisy, "{noisy_odometry} vs {noisy}");
 }
 
+/// Runs `command`, failing the test with its error output unless it
+/// succeeds.
+fn succeeds(command: &mut std::process::Command) {
+    let out = command.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// The Python that runs the bag scripts: `CLSMAP_PYTHON` (CI sets it to
 /// a virtual environment with PyPI `rosbags`), else `python3`.
 fn python_with_rosbags() -> std::process::Command {
@@ -1298,16 +1304,11 @@ fn a_rosbags_bag_of_the_csail_log_maps_as_the_carmen_log() {
     let work = tempfile::tempdir().unwrap();
     let bag = work.path().join("csail_bag");
     let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scripts/carmen_to_rosbag2.py");
-    let out = python_with_rosbags()
-        .arg(&script)
-        .arg(dir.join("mit-csail.clf"))
-        .arg(&bag)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    succeeds(
+        python_with_rosbags()
+            .arg(&script)
+            .arg(dir.join("mit-csail.clf"))
+            .arg(&bag),
     );
     assert!(bag.join("metadata.yaml").is_file());
 

@@ -688,6 +688,16 @@ mod tests {
         revisit_tied(turned, cfg, &[])
     }
 
+    /// The room seen from five keyframes along its first 2 m of path.
+    fn room_seen_along_two_metres(world: &World) -> (Vec<Arc<Keyframe>>, Vec<Pose2>) {
+        (0..5)
+            .map(|i| {
+                let pose = Pose2::new(5.0 + 0.5 * i as f64, 2.5, 0.1);
+                (keyframe(world, &pose, 0.5 * i as f64, i), pose)
+            })
+            .unzip()
+    }
+
     /// [`revisit`] with loop edges the poses agree with in the graph.
     fn revisit_tied(
         turned: f64,
@@ -695,13 +705,7 @@ mod tests {
         ties: &[(usize, usize)],
     ) -> (Result<LoopMatch, LoopRejection>, Pose2) {
         let world = room();
-        let mut keyframes = Vec::new();
-        let mut poses = Vec::new();
-        for i in 0..5 {
-            let pose = Pose2::new(5.0 + 0.5 * i as f64, 2.5, 0.1);
-            keyframes.push(keyframe(&world, &pose, 0.5 * i as f64, i));
-            poses.push(pose);
-        }
+        let (mut keyframes, mut poses) = room_seen_along_two_metres(&world);
         let truth = Pose2::new(5.4, 2.3, 0.3);
         keyframes.push(keyframe(&world, &truth, 150.0, 9));
         poses.push(Pose2::new(truth.x, truth.y, truth.theta + turned));
@@ -759,13 +763,7 @@ mod tests {
         cfg: &LoopClosureConfig,
     ) -> Result<LoopMatch, LoopRejection> {
         let world = room();
-        let mut keyframes = Vec::new();
-        let mut poses = Vec::new();
-        for i in 0..5 {
-            let pose = Pose2::new(5.0 + 0.5 * i as f64, 2.5, 0.1);
-            keyframes.push(keyframe(&world, &pose, 0.5 * i as f64, i));
-            poses.push(pose);
-        }
+        let (mut keyframes, mut poses) = room_seen_along_two_metres(&world);
         for i in 0..150 {
             let travelled = 3.0 + i as f64;
             keyframes.push(Arc::new(Keyframe {
