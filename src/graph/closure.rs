@@ -200,10 +200,10 @@ impl LoopClosureConfig {
 
     /// σ (rad) of the heading the chain edges allow between the first and
     /// the last of consecutive `keyframes` at `poses`: each edge's heading
-    /// σ (by the path between its keyframes and their turn), added in
-    /// quadrature, along the chain itself (a loop the poses agree with
-    /// would shorten the way, so this bound never refuses more than that
-    /// one would).
+    /// σ as a localized keyframe's edge has it (by the path between its
+    /// keyframes and their turn), added in quadrature, along the chain
+    /// itself (a loop the poses agree with would shorten the way, so this
+    /// bound is the looser).
     pub fn chain_heading_sd(&self, keyframes: &[std::sync::Arc<Keyframe>], poses: &[Pose2]) -> f64 {
         let variance: f64 = keyframes
             .windows(2)
