@@ -210,10 +210,8 @@ impl LoopClosureConfig {
             .zip(poses.windows(2))
             .map(|(k, p)| {
                 let path = (k[1].travelled - k[0].travelled).abs();
-                let turn = wrap_angle(p[1].theta - p[0].theta).abs();
-                let sd = self.chain_sigma_theta
-                    + self.chain_sigma_theta_per_metre * if path.is_finite() { path } else { 0.0 }
-                    + self.chain_sigma_theta_per_radian * turn;
+                let path = if path.is_finite() { path } else { 0.0 };
+                let (_, sd) = self.chain_sigmas(path, wrap_angle(p[1].theta - p[0].theta));
                 sd * sd
             })
             .sum();
@@ -223,12 +221,18 @@ impl LoopClosureConfig {
     /// Information of a chain edge for the motion `delta` (frame of the
     /// earlier keyframe).
     pub fn chain_information(&self, delta: &Pose2) -> Matrix3<f64> {
-        let d = delta.x.hypot(delta.y);
-        let sxy = self.chain_sigma_xy + self.chain_sigma_xy_per_metre * d;
-        let st = self.chain_sigma_theta
-            + self.chain_sigma_theta_per_metre * d
-            + self.chain_sigma_theta_per_radian * delta.theta.abs();
+        let (sxy, st) = self.chain_sigmas(delta.x.hypot(delta.y), delta.theta);
         super::diagonal_information(sxy, st)
+    }
+
+    /// σ of a chain edge over `distance` (m) and `turn` (rad): translation
+    /// (m) and heading (rad).
+    fn chain_sigmas(&self, distance: f64, turn: f64) -> (f64, f64) {
+        let sxy = self.chain_sigma_xy + self.chain_sigma_xy_per_metre * distance;
+        let st = self.chain_sigma_theta
+            + self.chain_sigma_theta_per_metre * distance
+            + self.chain_sigma_theta_per_radian * turn.abs();
+        (sxy, st)
     }
 }
 
@@ -556,10 +560,14 @@ pub fn close_loop(
                 // On the Freiburg campus with exact odometry a loop 68° off,
                 // on four lines against a reference of nine, passed every
                 // other check; the 900 m of chain it bent allowed 15°.
-                let chain =
-                    cfg.chain_heading_sd(&q.keyframes[j..=q.current], &q.poses[j..=q.current]);
+                // (The chain is walked only for a turn beyond the margin.)
+                let beyond_chain = || {
+                    let chain =
+                        cfg.chain_heading_sd(&q.keyframes[j..=q.current], &q.poses[j..=q.current]);
+                    turn > cfg.heading_margin + CHAIN_HEADING_SIGMAS * chain
+                };
                 if turn > cfg.vote_heading_window(drift_path)
-                    || turn > cfg.heading_margin + CHAIN_HEADING_SIGMAS * chain
+                    || (turn > cfg.heading_margin && beyond_chain())
                 {
                     why = why.max(LoopRejection::ImplausibleTurn);
                 } else {
@@ -709,22 +717,32 @@ mod tests {
         let truth = Pose2::new(5.4, 2.3, 0.3);
         keyframes.push(keyframe(&world, &truth, 150.0, 9));
         poses.push(Pose2::new(truth.x, truth.y, truth.theta + turned));
-        let paths = drift_paths(&keyframes, ties, 5);
+        (search_from_newest(&keyframes, &poses, ties, cfg), truth)
+    }
+
+    /// The loop search for the last of `keyframes`, voting allowed.
+    fn search_from_newest(
+        keyframes: &[Arc<Keyframe>],
+        poses: &[Pose2],
+        ties: &[(usize, usize)],
+        cfg: &LoopClosureConfig,
+    ) -> Result<LoopMatch, LoopRejection> {
+        let current = keyframes.len() - 1;
+        let paths = drift_paths(keyframes, ties, current);
         let query = LoopQuery {
-            keyframes: &keyframes,
-            poses: &poses,
-            current: 5,
+            keyframes,
+            poses,
+            current,
             paths: &paths,
             allow_voting: true,
         };
-        let found = close_loop(
+        close_loop(
             &query,
             &SegmentMapConfig::default(),
             &LocalizerConfig::default(),
             &GlobalConfig::default(),
             cfg,
-        );
-        (found, truth)
+        )
     }
 
     #[test]
@@ -778,22 +796,7 @@ mod tests {
         let truth = Pose2::new(5.4, 2.3, 0.3);
         keyframes.push(keyframe(&world, &truth, 153.0, 9));
         poses.push(Pose2::new(truth.x, truth.y, truth.theta + turned));
-        let current = keyframes.len() - 1;
-        let paths = drift_paths(&keyframes, &[], current);
-        let query = LoopQuery {
-            keyframes: &keyframes,
-            poses: &poses,
-            current,
-            paths: &paths,
-            allow_voting: true,
-        };
-        close_loop(
-            &query,
-            &SegmentMapConfig::default(),
-            &LocalizerConfig::default(),
-            &GlobalConfig::default(),
-            cfg,
-        )
+        search_from_newest(&keyframes, &poses, &[], cfg)
     }
 
     #[test]
