@@ -80,6 +80,12 @@ pub fn map(
         "  odometry heading:           σ ×{:.2} of the model (learnt); {} scans localized from a searched heading",
         summary.odometry_heading_scale, summary.heading_searches
     );
+    if config.odometry_check_sigmas > 0.0 {
+        println!(
+            "  odometry steps overruled:   {} (the scans' own step contradicted them)",
+            summary.odometry_steps_overruled
+        );
+    }
     if config.odometry.max_scale_correction > 0.0 {
         println!(
             "  odometry distances:         ×{:.4} (learnt from the localized scans)",

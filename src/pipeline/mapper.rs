@@ -137,6 +137,19 @@ const MAX_AGAINST_LOADED_MAP: f64 = 1.0;
 const MAX_MATCH_GAP: f64 = 1.0;
 const MAX_MATCH_STEP: f64 = 0.5;
 const MAX_MATCH_TURN: f64 = 0.35;
+/// Whether a robot step is short enough for two scans' points to pair up.
+fn within_match_reach(step: &Pose2) -> bool {
+    step.x.hypot(step.y) <= MAX_MATCH_STEP && step.theta.abs() <= MAX_MATCH_TURN
+}
+/// The scans' step overrules the odometry's only when at least this share
+/// of the scan's points pairs with the last scan's surfaces: scans of
+/// CSAIL thinned to 0.3 m or 0.3 rad apart that paired fewer were matched
+/// up to 20° and 0.3 m off.
+const CHECK_MIN_SHARE: f64 = 0.5;
+/// A step measured before localization stands for the step to the
+/// localized pose when the two differ by no more than this (m, rad): well
+/// inside the point match's reach, it would find the same step again.
+const SAME_STEP: (f64, f64) = (0.02, 0.005);
 /// A scan whose lines found too little to localize is matched point to
 /// point against the last scan when that one was localized at most this
 /// long before (s): sparse logs keep a scan per second or so.
@@ -531,22 +544,98 @@ impl Mapper {
         smoothing::smooth(&self.trajectory, &self.steps)
     }
 
-    /// The motion from the last scan to this one at `pose`, from their
-    /// points, when the two are close enough in time and place for their
-    /// points to pair up and the points constrain every direction.
-    fn match_last_scan(&self, current: &ScanWithPoints, t: f64, pose: &Pose2) -> Option<Pose2> {
-        let last = self.last_scan.as_ref()?;
-        let moved = last.pose.between(pose);
-        let near = t - last.t <= MAX_MATCH_GAP
-            && moved.x.hypot(moved.y) <= MAX_MATCH_STEP
-            && moved.theta.abs() <= MAX_MATCH_TURN;
-        if !near {
-            return None;
-        }
+    /// The motion from the last scan to this one (the robot's step, in
+    /// the last scan's robot frame) from their points, matched from each
+    /// step in `starts`: of the alignments that constrain every direction,
+    /// the one that pairs the most points. `None` when the scans lie too
+    /// far apart in time, or every start too far in place, for their
+    /// points to pair up.
+    fn measure_step(
+        &self,
+        current: &ScanWithPoints,
+        t: f64,
+        starts: &[Pose2],
+    ) -> Option<scan_match::Alignment> {
+        let last = self
+            .last_scan
+            .as_ref()
+            .filter(|last| t - last.t <= MAX_MATCH_GAP)?;
         let range = &self.config.extraction;
-        self.align_with_last(last.points.points(range), current.points(range), &moved)
+        let (reference, points) = (last.points.points(range), current.points(range));
+        starts
+            .iter()
+            .filter(|m| within_match_reach(m))
+            .filter_map(|m| self.align_with_last(reference, points, m))
             .filter(|a| a.open.is_none())
-            .map(|a| a.pose)
+            .max_by_key(|a| a.pairs)
+    }
+
+    /// The motion from the last scan to this one at `pose`, from their
+    /// points: the step measured before localization when `pose` lies
+    /// well inside its reach, else measured afresh from `pose`.
+    fn match_last_scan(
+        &self,
+        current: &ScanWithPoints,
+        t: f64,
+        pose: &Pose2,
+        measured: Option<Pose2>,
+    ) -> Option<Pose2> {
+        let moved = self.last_scan.as_ref()?.pose.between(pose);
+        if let Some(step) = measured {
+            let (offset, turn) = SAME_STEP;
+            let d = step.between(&moved);
+            if d.x.hypot(d.y) <= offset && d.theta.abs() <= turn {
+                return Some(step);
+            }
+        }
+        self.measure_step(current, t, &[moved]).map(|a| a.pose)
+    }
+
+    /// The predicted pose `predicted`, or where the scans' own step from
+    /// the last scan puts the robot when that step contradicts the
+    /// odometry's by more than `odometry_check_sigmas` of the odometry
+    /// noise model; and the step measured, if any. The points are matched
+    /// from the odometry's step and, when that finds no agreeing step,
+    /// from the last scan's (constant velocity): a faulty odometry step
+    /// may start the match beyond its reach.
+    fn check_odometry(
+        &mut self,
+        current: &ScanWithPoints,
+        t: f64,
+        predicted: Pose2,
+        predicted_cov: &[[f64; 3]; 3],
+    ) -> (Pose2, Option<Pose2>) {
+        let Some(last) = &self.last_scan else {
+            return (predicted, None);
+        };
+        let from_last = last.pose;
+        let odometry_step = from_last.between(&predicted);
+        if !within_match_reach(&odometry_step) {
+            return (predicted, None);
+        }
+        let gate = self.config.odometry_check_sigmas;
+        let agrees = |a: &scan_match::Alignment| {
+            mahalanobis(&from_last.compose(&a.pose), &predicted, predicted_cov) <= gate
+        };
+        let mut measured = self.measure_step(current, t, &[odometry_step]);
+        if !measured.as_ref().is_some_and(agrees) {
+            let previous = match self.trajectory.as_slice() {
+                [.., (_, before), (_, last)] => Some(before.between(last)),
+                _ => None,
+            };
+            let again = previous.and_then(|p| self.measure_step(current, t, &[p]));
+            measured = [measured, again]
+                .into_iter()
+                .flatten()
+                .max_by_key(|a| a.pairs);
+        }
+        match measured {
+            Some(a) if !agrees(&a) && a.pairs as f64 >= CHECK_MIN_SHARE * a.points as f64 => {
+                self.summary.odometry_steps_overruled += 1;
+                (from_last.compose(&a.pose), Some(a.pose))
+            }
+            other => (predicted, other.map(|a| a.pose)),
+        }
     }
 
     /// [`scan_match::align`] of `current` against the last scan's
@@ -1032,7 +1121,8 @@ impl Mapper {
         // The first scan after the robot was found in a loaded map starts
         // from where it was found.
         // Found after a hint mid-run: the step to here is a jump.
-        let seeded = self.seed.is_some() && std::mem::take(&mut self.hinted);
+        let from_seed = self.seed.is_some();
+        let seeded = from_seed && std::mem::take(&mut self.hinted);
         let (predicted, predicted_cov) = match self.seed.take() {
             Some(found) => found,
             None => (prediction.pose, prediction.cov),
@@ -1069,6 +1159,18 @@ impl Mapper {
         };
         let mut cov = predicted_cov;
         let current = ScanWithPoints::new(record.scan.clone());
+        let (predicted, measured_step) =
+            if self.config.odometry_check_sigmas > 0.0 && prediction.from_odometry && !from_seed {
+                let t = Instant::now();
+                let checked = trace_span!("check_odometry").in_scope(|| {
+                    self.check_odometry(&current, record.scan.t, predicted, &predicted_cov)
+                });
+                self.clocks.scan_match.add(t.elapsed());
+                checked
+            } else {
+                (predicted, None)
+            };
+        outcome.pose = predicted;
         // Whether the map may learn from this scan: always when localized
         // (or on the first scan), and after a failure only when the scan
         // shows too little known structure to localize (new territory);
@@ -1329,8 +1431,9 @@ impl Mapper {
         self.trajectory.push((record.scan.t, outcome.pose));
         let step = if self.measure_steps {
             let t = Instant::now();
-            let step = trace_span!("scan_match")
-                .in_scope(|| self.match_last_scan(&current, record.scan.t, &outcome.pose));
+            let step = trace_span!("scan_match").in_scope(|| {
+                self.match_last_scan(&current, record.scan.t, &outcome.pose, measured_step)
+            });
             self.clocks.scan_match.add(t.elapsed());
             step
         } else {
@@ -1422,6 +1525,70 @@ mod tests {
             wrap_angle(second.pose.theta - moved.theta).abs() < 0.01
                 && (second.pose.x - moved.x).hypot(second.pose.y - moved.y) < 0.02,
             "{second:?} vs {moved:?}"
+        );
+    }
+
+    /// The odometry counts the robot's backward steps forwards, as
+    /// Freiburg 079's does: the robot drives 1.2 m, stops, and backs up
+    /// 1.08 m while the odometry reports it going on, each prediction
+    /// landing up to 0.24 m from the truth. The scans' own step overrules
+    /// the odometry on the backward steps and on no other, and the pose
+    /// stays within 2 cm of the truth; with the check off it ends over a
+    /// metre off.
+    #[test]
+    fn odometry_that_counts_backward_steps_forward_is_overruled_by_the_scans() {
+        // (true step, reported step) along the robot's heading, m.
+        let steps: Vec<(f64, f64)> = std::iter::repeat_n((0.12, 0.12), 10)
+            .chain(std::iter::repeat_n((0.0, 0.0), 2))
+            .chain([(-0.06, 0.06)])
+            .chain(std::iter::repeat_n((-0.12, 0.12), 8))
+            .collect();
+        let drive = |config: MapperConfig| {
+            let world = World::room_with_boxes();
+            let spec = ScanSpec::lms200_half_degree(0.005);
+            let mut rng = Rng::new(5);
+            let mut mapper = Mapper::new(config);
+            let start = Pose2::new(3.0, 3.0, 0.3);
+            let (mut along, mut reported, mut faulty) = (0.0, 0.0, 0);
+            let mut worst: f64 = 0.0;
+            let mut overruled_good = 0;
+            for (k, &(step, claimed)) in std::iter::once(&(0.0, 0.0)).chain(&steps).enumerate() {
+                along += step;
+                reported += claimed;
+                faulty += usize::from(step != claimed);
+                let truth = start.compose(&Pose2::new(along, 0.0, 0.0));
+                let scan = cast_scan(&world, &truth, &spec, 0.2 * k as f64, &mut rng);
+                let before = mapper.summary().odometry_steps_overruled;
+                let out = mapper.process(&ScanRecord {
+                    scan,
+                    odometry: Some(Pose2::new(reported, 0.0, 0.0)),
+                });
+                worst = worst.max((out.pose.x - along).hypot(out.pose.y));
+                let overruled = mapper.summary().odometry_steps_overruled > before;
+                overruled_good += usize::from(overruled && step == claimed);
+            }
+            (
+                worst,
+                mapper.summary().odometry_steps_overruled,
+                faulty,
+                overruled_good,
+            )
+        };
+        let (checked, overruled, faulty, overruled_good) = drive(MapperConfig::default());
+        assert!(checked < 0.02, "{checked} m off with the check");
+        assert_eq!(overruled_good, 0);
+        // The first backward step, from standstill, the lines correct.
+        assert!(
+            overruled + 1 >= faulty,
+            "{overruled} of {faulty} faulty steps overruled"
+        );
+        let (unchecked, ..) = drive(MapperConfig {
+            odometry_check_sigmas: 0.0,
+            ..MapperConfig::default()
+        });
+        assert!(
+            unchecked > 1.0,
+            "{unchecked} m off without the check, {checked} m with"
         );
     }
 

@@ -181,6 +181,9 @@ pub struct MappingSummary {
     /// Scans localized from a searched heading because nothing matched
     /// from the odometry's (see `LocalizerConfig::heading_search`).
     pub heading_searches: usize,
+    /// Scans predicted from the scans' own step because it contradicted
+    /// the odometry's (see `MapperConfig::odometry_check_sigmas`).
+    pub odometry_steps_overruled: usize,
     /// Loop closure: searches, loops accepted and rejected, optimisations.
     pub loops: LoopStats,
     pub mean_time: StageTimes,
