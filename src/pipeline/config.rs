@@ -230,13 +230,14 @@ pub struct MapperConfig {
     /// scan's lines instead (line scan matching). Default true.
     pub previous_scan_fallback: bool,
     /// An odometry step that the scans' own step (this scan's points
-    /// matched to the last scan's) contradicts by more than this many
-    /// standard deviations of the odometry noise model (`[odometry]`) is
-    /// replaced by the scans' step before localization; 0 = never.
-    /// Default 5. Freiburg 079's odometry counts every backward step
-    /// forwards: the prediction then runs 0.2 m a scan the wrong way,
-    /// further than the lines can pull it back along a corridor, and the
-    /// map there came out 1–3 m off (relation error 0.083 → 0.045 m).
+    /// matched to the last scan's) puts more than this many standard
+    /// deviations of the prediction away (Mahalanobis over x, y, θ), and
+    /// farther than the lines' matches reach (half the localizer's
+    /// correspondence gates), is replaced by the scans' step before
+    /// localization; 0 = never. Default 5. Freiburg 079's odometry counts
+    /// every backward step forwards: the prediction then runs up to
+    /// 0.2 m a scan the wrong way, further than the lines can pull it
+    /// back along a corridor, and the map there came out 1–3 m off.
     pub odometry_check_sigmas: f64,
     /// The Closed Line Segment map grown on keyframes.
     pub cls: ClsTuning,
