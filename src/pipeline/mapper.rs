@@ -1179,16 +1179,18 @@ impl Mapper {
         };
         let mut cov = predicted_cov;
         let current = ScanWithPoints::new(record.scan.clone());
-        // Point matching, before localization and after: timed as one.
+        // Point matching, before localization and after: timed as one
+        // run of the stage, when either ran.
         let t = Instant::now();
-        let (predicted, measured_step) =
-            if self.config.odometry_check_sigmas > 0.0 && prediction.from_odometry && !from_seed {
-                trace_span!("check_odometry").in_scope(|| {
-                    self.check_odometry(&current, record.scan.t, predicted, &predicted_cov)
-                })
-            } else {
-                (predicted, None)
-            };
+        let checking =
+            self.config.odometry_check_sigmas > 0.0 && prediction.from_odometry && !from_seed;
+        let (predicted, measured_step) = if checking {
+            trace_span!("check_odometry").in_scope(|| {
+                self.check_odometry(&current, record.scan.t, predicted, &predicted_cov)
+            })
+        } else {
+            (predicted, None)
+        };
         let mut matching_time = t.elapsed();
         outcome.pose = predicted;
         // Whether the map may learn from this scan: always when localized
@@ -1459,7 +1461,9 @@ impl Mapper {
         } else {
             None
         };
-        self.clocks.scan_match.add(matching_time);
+        if checking || self.measure_steps {
+            self.clocks.scan_match.add(matching_time);
+        }
         self.steps.push(step);
         self.last_scan = Some(LastScan {
             points: current,
