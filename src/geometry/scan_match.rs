@@ -66,6 +66,9 @@ pub struct ScanPoints {
     /// Per beam, its point and the unit normal of the surface there, if
     /// the surface is flat.
     surfaces: Vec<Option<([f64; 2], [f64; 2])>>,
+    /// Per beam, the point of `surfaces`, NaN where it has none: the
+    /// partner search reads these alone, and a NaN is never nearer.
+    surface_points: Vec<[f64; 2]>,
 }
 
 impl ScanPoints {
@@ -87,12 +90,16 @@ impl ScanPoints {
                 (r.is_finite() && r >= min_range && r <= max_range).then_some([r * c, r * s])
             })
             .collect();
-        let surfaces = (0..points.len())
+        let surfaces: Vec<Option<([f64; 2], [f64; 2])>> = (0..points.len())
             .map(|i| Some((points[i]?, normal(&points, i)?)))
             .collect();
         ScanPoints {
             angle_increment: scan.angle_increment,
             points,
+            surface_points: surfaces
+                .iter()
+                .map(|s| s.map_or([f64::NAN; 2], |(q, _)| q))
+                .collect(),
             surfaces,
         }
     }
@@ -124,15 +131,17 @@ impl ScanPoints {
     fn partner(&self, p: [f64; 2], beam: i64, around: i64, reach: f64) -> Option<usize> {
         let mut best = None;
         let mut best_d2 = reach * reach;
-        for j in (beam - around)..=(beam + around) {
-            let Ok(j) = usize::try_from(j) else { continue };
-            let Some(Some((q, _))) = self.surfaces.get(j) else {
-                continue;
-            };
+        // The beams that exist, in the same order as beam by beam.
+        let lo = usize::try_from(beam.saturating_sub(around)).unwrap_or(0);
+        let Ok(hi) = usize::try_from(beam.saturating_add(around)) else {
+            return None;
+        };
+        let hi = hi.min(self.surface_points.len().checked_sub(1)?);
+        for (j, q) in self.surface_points.get(lo..=hi)?.iter().enumerate() {
             let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
             if d2 < best_d2 {
                 best_d2 = d2;
-                best = Some(j);
+                best = Some(lo + j);
             }
         }
         best

@@ -47,15 +47,30 @@ pub fn wall_scatter<S: Borrow<RangeScan>>(
     scans: impl IntoIterator<Item = S>,
 ) -> Option<WallScatter> {
     let mut residuals: Vec<f64> = Vec::new();
+    // The beams' directions, kept while the scans' geometry stays.
+    let mut directions: Vec<(f64, f64)> = Vec::new();
+    let mut geometry = None;
     for scan in scans {
         let scan = scan.borrow();
-        let points: Vec<Option<(f64, [f64; 2])>> = (0..scan.ranges.len())
-            .map(|i| {
-                let r = *scan.ranges[i].as_ref().ok()?;
-                ((MIN_RANGE..=MAX_RANGE).contains(&r) && r.is_finite()).then(|| {
-                    let (s, c) = scan.angle(i).sin_cos();
-                    (r, [r * c, r * s])
-                })
+        let this = (
+            scan.angle_min.to_bits(),
+            scan.angle_increment.to_bits(),
+            scan.ranges.len(),
+        );
+        if geometry != Some(this) {
+            directions = (0..scan.ranges.len())
+                .map(|i| scan.angle(i).sin_cos())
+                .collect();
+            geometry = Some(this);
+        }
+        let points: Vec<Option<(f64, [f64; 2])>> = scan
+            .ranges
+            .iter()
+            .zip(&directions)
+            .map(|(r, &(s, c))| {
+                let r = *r.as_ref().ok()?;
+                ((MIN_RANGE..=MAX_RANGE).contains(&r) && r.is_finite())
+                    .then_some((r, [r * c, r * s]))
             })
             .collect();
         for start in (0..points.len().saturating_sub(RUN - 1)).step_by(RUN_STEP) {

@@ -71,7 +71,13 @@ impl BasePose {
 /// Wraps an angle in radians to (-π, π].
 #[must_use]
 pub fn wrap_angle(a: f64) -> f64 {
-    let r = a.rem_euclid(TAU);
+    // Within one turn either way the remainder is `a` itself, exactly:
+    // the division's remainder is spared (the same bits as `rem_euclid`).
+    let r = if a.abs() < TAU {
+        if a < 0.0 { a + TAU } else { a }
+    } else {
+        a.rem_euclid(TAU)
+    };
     if r > PI { r - TAU } else { r }
 }
 
@@ -302,6 +308,15 @@ mod tests {
     }
 
     proptest! {
+        #[test]
+        fn wrap_angle_gives_the_bits_of_the_remainder(
+            a in prop_oneof![-10.0..10.0f64, -1e6..1e6f64, Just(-0.0), Just(TAU), Just(-TAU)],
+        ) {
+            let r = a.rem_euclid(TAU);
+            let reference = if r > PI { r - TAU } else { r };
+            prop_assert_eq!(wrap_angle(a).to_bits(), reference.to_bits(), "{}", a);
+        }
+
         #[test]
         fn integrate_composes(
             x in -10.0..10.0f64, y in -10.0..10.0f64, th in -PI..PI,

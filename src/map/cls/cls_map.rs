@@ -461,8 +461,14 @@ impl ClsMap {
             ]
         };
         // Counted, so a segment the update duplicated is not taken for old.
+        let segments = touched
+            .iter()
+            .chain(&untouched)
+            .flat_map(|&i| self.shapes[i].loops())
+            .map(|l| l.len())
+            .sum();
         let mut before: HashMap<[u64; 4], usize, BuildHasherDefault<BitsHasher>> =
-            HashMap::default();
+            HashMap::with_capacity_and_hasher(segments, BuildHasherDefault::default());
         for &i in touched.iter().chain(&untouched) {
             for l in self.shapes[i].loops() {
                 for seg in l.segments() {

@@ -307,7 +307,15 @@ pub fn check_loops_changed<'a>(
     shapes: impl IntoIterator<Item = &'a ClsShape>,
     mut unchanged: impl FnMut([f64; 2], [f64; 2]) -> bool,
 ) -> Result<(), InvariantError> {
-    let mut all: Vec<SweepEntry> = Vec::new();
+    // Sized up front: grown push by push, a map of thousands of segments
+    // was copied over and over on every update.
+    let shapes: Vec<&ClsShape> = shapes.into_iter().collect();
+    let segments = shapes
+        .iter()
+        .flat_map(|shape| shape.loops())
+        .map(|lp| lp.len())
+        .sum();
+    let mut all: Vec<SweepEntry> = Vec::with_capacity(segments);
     let mut loop_index = 0;
     for shape in shapes {
         for (k, lp) in shape.loops().enumerate() {
