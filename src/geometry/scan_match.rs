@@ -63,12 +63,12 @@ pub struct ScanPoints {
     angle_increment: f64,
     /// Per beam, its point, if the beam returned within the range limits.
     points: Vec<Option<[f64; 2]>>,
-    /// Per beam, its point and the unit normal of the surface there, if
-    /// the surface is flat.
-    surfaces: Vec<Option<([f64; 2], [f64; 2])>>,
-    /// Per beam, the point of `surfaces`, NaN where it has none: the
-    /// partner search reads these alone, and a NaN is never nearer.
+    /// Per beam, its point if the surface there is flat, else NaN (never
+    /// nearer than anything in the partner search).
     surface_points: Vec<[f64; 2]>,
+    /// Per beam, the unit normal of the surface at its surface point
+    /// (meaningless where that is NaN).
+    normals: Vec<[f64; 2]>,
 }
 
 impl ScanPoints {
@@ -90,17 +90,18 @@ impl ScanPoints {
                 (r.is_finite() && r >= min_range && r <= max_range).then_some([r * c, r * s])
             })
             .collect();
-        let surfaces: Vec<Option<([f64; 2], [f64; 2])>> = (0..points.len())
-            .map(|i| Some((points[i]?, normal(&points, i)?)))
-            .collect();
+        let (surface_points, normals) = (0..points.len())
+            .map(|i| {
+                points[i]
+                    .zip(normal(&points, i))
+                    .unwrap_or(([f64::NAN; 2], [f64::NAN; 2]))
+            })
+            .unzip();
         ScanPoints {
             angle_increment: scan.angle_increment,
             points,
-            surface_points: surfaces
-                .iter()
-                .map(|s| s.map_or([f64::NAN; 2], |(q, _)| q))
-                .collect(),
-            surfaces,
+            surface_points,
+            normals,
         }
     }
 
@@ -258,9 +259,7 @@ fn refine(
             let found = reference.partner(p, beam, around, reach);
             *last = found.and_then(|j| i64::try_from(j).ok());
             let Some(j) = found else { continue };
-            let Some((q, n)) = reference.surfaces[j] else {
-                continue;
-            };
+            let (q, n) = (reference.surface_points[j], reference.normals[j]);
             let e = n[0] * (p[0] - q[0]) + n[1] * (p[1] - q[1]);
             let turn = n[0] * (-s * m[0] - c * m[1]) + n[1] * (c * m[0] - s * m[1]);
             rows.push(([n[0], n[1], turn], e));
