@@ -92,7 +92,17 @@ pub(crate) fn wall_end(
     // How far along the wall, past its last point, the next surface's
     // first point lies (m), when that surface is a corner's.
     let mut next_point_beyond = None;
-    let jamb = range_next > range_end + jump;
+    // A jump away is a jamb unless the next beam's point lies on the
+    // wall's line all the same: at a grazing view consecutive beams on one
+    // wall differ in range by more than the jump (14 cm from 4 m at 15°),
+    // and a last point trimmed off the line for its noise then read as a
+    // jamb 11 cm short of the true end, which the next scan's gap
+    // confirmed and the map kept (the simulated corridor's pose 10 cm off).
+    let jamb = range_next > range_end + jump
+        && line
+            .signed_distance(beam_point(scan, mount, next, range_next))
+            .abs()
+            > off_line_for(end);
     let is_end = if jamb {
         true
     } else if range_next < range_end - jump {
@@ -325,6 +335,8 @@ fn face_corner(
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
+    use super::{SeenEnd, wall_end};
+    use crate::geometry::points::ScanPoint;
     use crate::geometry::{CogLine, ExtractionConfig, Pose2, extract_lines};
     use crate::sim::{Rng, ScanSpec, World, cast_scan};
 
@@ -537,6 +549,73 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The last beam of a noise-free 0.5° scan of `world` from (1.5, 0)
+    /// that meets the line y = −1 before `x` (robot frame), as the end of
+    /// a line along it, and what [`wall_end`] makes of that end.
+    fn end_of_wall_at(world: &World, x: f64) -> (Option<SeenEnd>, CogLine) {
+        let scan = cast_scan(
+            world,
+            &Pose2::new(1.5, 0.0, 0.0),
+            &ScanSpec::lms200_half_degree(0.0),
+            0.0,
+            &mut Rng::new(1),
+        );
+        let point = |i: usize| {
+            let r = *scan.ranges[i].as_ref().ok()?;
+            let (s, c) = scan.angle(i).sin_cos();
+            Some(([r * c, r * s], [c, s]))
+        };
+        let i = (0..scan.ranges.len())
+            .filter(|&i| point(i).is_some_and(|(p, _)| (p[1] + 1.0).abs() < 1e-6 && p[0] <= x))
+            .max_by(|&a, &b| point(a).unwrap().0[0].total_cmp(&point(b).unwrap().0[0]))
+            .unwrap();
+        let (p, beam) = point(i).unwrap();
+        let end = ScanPoint {
+            p,
+            beam,
+            sigma_range: 0.01,
+            beam_index: i,
+        };
+        let line = CogLine::from_centre(
+            0.0,
+            [0.5 * p[0], -1.0],
+            -0.5 * p[0],
+            0.5 * p[0],
+            0.002,
+            0.001,
+            100,
+        );
+        let end = wall_end(
+            &scan,
+            &Pose2::IDENTITY,
+            &ExtractionConfig::default(),
+            &end,
+            &line,
+            1,
+        );
+        (end, line)
+    }
+
+    #[test]
+    fn a_line_trimmed_short_of_a_grazing_wall_s_end_is_no_jamb() {
+        // 3.7 m down a corridor wall the beams meet it 12 cm apart, and
+        // the next beam's range exceeds the last point's by more than a
+        // jamb's jump. If that point is still on the wall (a last point
+        // trimmed off the line for its noise), the line's end is none of
+        // the wall's; where the wall does end (a door recess 3.5 m ahead),
+        // the next beam passes its line and the end is a jamb.
+        let mut long = World::new();
+        long.add_wall([-5.0, -1.0], [40.0, -1.0]);
+        assert!(end_of_wall_at(&long, 3.7).0.is_none());
+        let (jamb, line) = end_of_wall_at(&wall_with_door_recess(), 3.5);
+        let gap = jamb.expect("a jamb").gap.expect("its gap");
+        let at = line.along([3.5, -1.0]);
+        assert!(
+            gap.last < at && at < gap.past,
+            "the gap holds the end: {gap:?}"
+        );
     }
 
     #[test]

@@ -810,12 +810,21 @@ impl Mapper {
         outcome: &mut ScanOutcome,
     ) -> Result<LocalizationResult, Rejection> {
         let cfg = &self.config.localizer;
+        // Only a scan far from the last one (in time or motion) may take a
+        // heading from the wide search: between scans close enough to
+        // pair their points the odometry's heading cannot be 20° off, and
+        // in a standstill of ACES (odometry unchanged, its prior widened)
+        // the wide search turned a scan 30° off.
+        let wide = self.last_scan.as_ref().is_none_or(|l| {
+            t - l.t > MAX_MATCH_GAP || !within_match_reach(&l.pose.between(&predicted))
+        });
         match localize_searching_heading(
             &self.lines,
             self.map.index(),
             predicted,
             predicted_cov,
             cfg,
+            wide,
         ) {
             Err(LocalizeError::TooFewMatches { .. })
                 if self.config.previous_scan_fallback && !self.previous_scan.is_empty() =>
@@ -826,6 +835,7 @@ impl Mapper {
                     predicted,
                     predicted_cov,
                     cfg,
+                    wide,
                 ) {
                     Ok(fix) => {
                         outcome.by_previous_scan = true;
