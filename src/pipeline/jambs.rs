@@ -357,9 +357,10 @@ mod tests {
         // A jamb 3 m ahead, approached 2 cm a scan. The second scan's gap
         // narrows the first's to 8 mm; every later scan's beams fall as the
         // first scan's did (the raster moving with the robot), so only the
-        // wall's side of the gap is met again and again, while the far side
-        // is carried from the second scan. Widened by 3 % of each step, that
-        // side alone moved 17 mm in 28 scans and the middle with it; the
+        // far side of the gap (the beam past the end) is met again and
+        // again, while the wall's side is carried from the second scan.
+        // Widened by 3 % of each step, that side alone moved 17 mm in 28
+        // scans and the middle with it; the
         // jamb is placed within the gaps carried as the odometry moved
         // them.
         let mut tracks = JambTracks::default();
