@@ -92,17 +92,17 @@ pub(crate) fn wall_end(
     // How far along the wall, past its last point, the next surface's
     // first point lies (m), when that surface is a corner's.
     let mut next_point_beyond = None;
+    // The next beam's point, and how far it lies off the wall's line.
+    let off_line = off_line_for(end);
+    let q = beam_point(scan, mount, next, range_next);
+    let first = line.signed_distance(q);
     // A jump away is a jamb unless the next beam's point lies on the
     // wall's line all the same: at a grazing view consecutive beams on one
     // wall differ in range by more than the jump (14 cm from 4 m at 15°),
     // and a last point trimmed off the line for its noise then read as a
     // jamb 11 cm short of the true end, which the next scan's gap
     // confirmed and the map kept (the simulated corridor's pose 10 cm off).
-    let jamb = range_next > range_end + jump
-        && line
-            .signed_distance(beam_point(scan, mount, next, range_next))
-            .abs()
-            > off_line_for(end);
+    let jamb = range_next > range_end + jump && first.abs() > off_line;
     let is_end = if jamb {
         true
     } else if range_next < range_end - jump {
@@ -128,10 +128,7 @@ pub(crate) fn wall_end(
         // the wall, and for a face after up to three or eight such beams:
         // 0.107 and 0.085 m against 0.049 m on CSAIL thinned to scans
         // 0.7 m apart).
-        let off_line = off_line_for(end);
         let offset = |i: usize, r: f64| line.signed_distance(beam_point(scan, mount, i, r));
-        let q = beam_point(scan, mount, next, range_next);
-        let first = line.signed_distance(q);
         next_point_beyond = Some(step as f64 * (line.along(q) - line.along(end.p)));
         let after = next
             .checked_add_signed(step)
