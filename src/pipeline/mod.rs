@@ -113,6 +113,10 @@ pub struct ScanOutcome {
     /// Whether the pose came from the previous scan's lines because the
     /// map offered too few matches.
     pub by_previous_scan: bool,
+    /// Whether the map's lines were matched from the heading the last
+    /// scan's points gave, because neither the map's lines nor the last
+    /// scan's matched enough from the prediction.
+    pub by_last_scan_points: bool,
 }
 
 /// A search for the robot in a loaded map, with its hypotheses so far.

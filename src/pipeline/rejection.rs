@@ -15,6 +15,10 @@ pub(super) enum Rejection {
     #[error("correction of {sigmas:.1} σ from the odometry prediction")]
     Inconsistent { sigmas: f64 },
     #[error(
+        "a fix from few lines turning the heading {turn:.3} rad ({sigmas:.1} σ) from the prediction"
+    )]
+    TurnOnFewLines { turn: f64, sigmas: f64 },
+    #[error(
         "{length:.2} m of the scan's walls stand where the loaded map saw through and has no wall"
     )]
     AgainstTheLoadedMap { length: f64 },
@@ -32,6 +36,7 @@ impl Rejection {
                 LocalizeError::NotConverged { .. } => RejectionKind::NotConverged,
             },
             Rejection::Inconsistent { .. } => RejectionKind::InconsistentWithOdometry,
+            Rejection::TurnOnFewLines { .. } => RejectionKind::TurnOnFewLines,
             Rejection::AgainstTheLoadedMap { .. } => RejectionKind::AgainstTheLoadedMap,
         }
     }
@@ -54,6 +59,9 @@ pub enum RejectionKind {
     NotConverged,
     /// The fix disagreed with the odometry beyond `max_correction_sigmas`.
     InconsistentWithOdometry,
+    /// The fix rested on few lines and turned the heading beyond
+    /// `few_lines_turn_sigmas`.
+    TurnOnFewLines,
     /// Before the robot was found in a loaded map: no pose at all.
     NotFoundInTheMapYet,
     /// The fix put walls of the scan where the loaded map saw through and
@@ -73,6 +81,7 @@ impl RejectionKind {
             RejectionKind::Singular => "Singular",
             RejectionKind::NotConverged => "NotConverged",
             RejectionKind::InconsistentWithOdometry => "InconsistentWithOdometry",
+            RejectionKind::TurnOnFewLines => "TurnOnFewLines",
             RejectionKind::NotFoundInTheMapYet => "NotFoundInTheMapYet",
             RejectionKind::AgainstTheLoadedMap => "AgainstTheLoadedMap",
         }
