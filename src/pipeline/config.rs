@@ -240,9 +240,11 @@ pub struct MapperConfig {
     /// back along a corridor, and the map there came out 1–3 m off.
     pub odometry_check_sigmas: f64,
     /// A fix resting on three lines or fewer that turns the heading by
-    /// more than this many standard deviations of the prediction's heading
-    /// is refused and the prediction kept, unless the fix before asked for
-    /// the same turn (then the odometry is what is wrong); 0 = never.
+    /// more than this many standard deviations of the prediction's
+    /// heading, while those lines leave the heading's σ above half the
+    /// prediction's, is refused and the prediction kept, unless the fix
+    /// before asked for the same turn (then the odometry is what is
+    /// wrong); 0 = never.
     /// Default 3. Two lines along a corridor turned single scans 6–7° where
     /// the odometry was right, and the walls mapped from them carried the
     /// error on (the Infinite Corridor, 0.37 → 0.05 m).

@@ -1617,7 +1617,6 @@ mod tests {
         // Four lines, a turn within the gate, the gate off: it stands.
         assert!(turn_on_few_lines(&fix(4, 7.0), &predicted, &cov, 3.0, None).is_none());
         assert!(turn_on_few_lines(&fix(2, 4.4), &predicted, &cov, 3.0, None).is_none());
-        assert!(turn_on_few_lines(&fix(2, 7.0), &predicted, &cov, 3.0, None).is_some());
         assert!(turn_on_few_lines(&fix(2, 7.0), &predicted, &cov, 0.0, None).is_none());
         // Lines that fix the heading to 0.5° themselves: it stands.
         let narrow = [
